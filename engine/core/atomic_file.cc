@@ -1,0 +1,118 @@
+#include "engine/core/atomic_file.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+namespace reflcap {
+namespace fs = std::filesystem;
+
+namespace {
+// A name unique within this process and across concurrent processes.
+std::string TempSuffix() {
+  static std::atomic<int> counter{0};
+  return StrCat(".tmp-", ::getpid(), "-", counter++);
+}
+}  // namespace
+
+Status WriteFileAtomic(const fs::path& path,
+                       const std::function<Status(const fs::path& tmp_path)>& write) {
+  fs::path dir = path.parent_path();
+  std::error_code ec;
+  if (!dir.empty() && !fs::exists(dir, ec)) {
+    return NotFoundError(path.string(), ": output folder does not exist");
+  }
+  fs::path tmp = dir / ("." + path.filename().string() + TempSuffix());
+  Status status = write(tmp);
+  if (!status.ok()) {
+    fs::remove(tmp, ec);
+    return status;
+  }
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    return InternalError(path.string(), ": cannot rename temporary file into place: ", ec.message());
+  }
+  return OkStatus();
+}
+
+Status WriteTextFileAtomic(const fs::path& path, const std::string& contents) {
+  return WriteFileAtomic(path, [&](const fs::path& tmp) -> Status {
+    std::ofstream out(tmp, std::ios::binary);
+    out << contents;
+    out.close();
+    if (!out) return InternalError(path.string(), ": write failed");
+    return OkStatus();
+  });
+}
+
+StatusOr<std::string> ReadTextFile(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return NotFoundError(path.string(), ": cannot open file");
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  if (in.bad()) return DataLossError(path.string(), ": read failed");
+  return buffer.str();
+}
+
+StatusOr<StagingDir> StagingDir::Create(const fs::path& destination, bool overwrite) {
+  std::error_code ec;
+  fs::path dest = fs::absolute(destination, ec);
+  if (fs::exists(dest, ec)) {
+    if (!fs::is_directory(dest, ec)) {
+      return FailedPreconditionError(destination.string(), ": exists and is not a folder");
+    }
+    if (!overwrite && !fs::is_empty(dest, ec)) {
+      return FailedPreconditionError(destination.string(),
+                                     ": folder exists and is not empty (pass --overwrite to "
+                                     "replace it, or choose another --out)");
+    }
+  }
+  fs::path parent = dest.parent_path();
+  fs::create_directories(parent, ec);
+  if (ec) return InternalError(parent.string(), ": cannot create folder: ", ec.message());
+  fs::path staging = parent / ("." + dest.filename().string() + TempSuffix());
+  fs::create_directories(staging, ec);
+  if (ec) return InternalError(staging.string(), ": cannot create folder: ", ec.message());
+  return StagingDir(dest, staging, overwrite);
+}
+
+StagingDir::StagingDir(StagingDir&& other) noexcept
+    : destination_(std::move(other.destination_)),
+      staging_(std::move(other.staging_)),
+      overwrite_(other.overwrite_),
+      committed_(other.committed_) {
+  other.committed_ = true;  // the moved-from object owns nothing
+}
+
+StagingDir::~StagingDir() {
+  if (committed_) return;
+  std::error_code ec;
+  fs::remove_all(staging_, ec);
+}
+
+Status StagingDir::Commit() {
+  REFLCAP_CHECK(!committed_) << "StagingDir committed twice";
+  std::error_code ec;
+  fs::path old;
+  if (fs::exists(destination_, ec)) {
+    // Move the previous folder aside first so the swap is two renames; delete it afterwards.
+    old = destination_.parent_path() / ("." + destination_.filename().string() + ".old" +
+                                         TempSuffix());
+    fs::rename(destination_, old, ec);
+    if (ec) return InternalError(destination_.string(), ": cannot replace folder: ", ec.message());
+  }
+  fs::rename(staging_, destination_, ec);
+  if (ec) {
+    if (!old.empty()) fs::rename(old, destination_, ec);
+    return InternalError(destination_.string(), ": cannot move output into place: ", ec.message());
+  }
+  committed_ = true;
+  if (!old.empty()) fs::remove_all(old, ec);
+  return OkStatus();
+}
+
+}  // namespace reflcap

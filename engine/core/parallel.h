@@ -1,0 +1,16 @@
+#pragma once
+// ParallelFor over [begin, end) in chunks on all hardware threads (or `threads` when > 0).
+// The body receives a [chunk_begin, chunk_end) range and the worker index (0..workers-1) so it can
+// use per-worker scratch without locks. Runs inline when there is one chunk.
+#include <cstdint>
+#include <functional>
+
+namespace reflcap {
+
+int HardwareThreads();
+
+void ParallelFor(int64_t begin, int64_t end, int64_t chunk,
+                 const std::function<void(int64_t chunk_begin, int64_t chunk_end, int worker)>& body,
+                 int threads = 0);
+
+}  // namespace reflcap

@@ -1,0 +1,46 @@
+#pragma once
+// Image: the one float image type of reflcap. Interleaved channels, row-major, row 0 at the top
+// (as in photographs and OpenCV). HDR photographs are 3-channel linear RGB; masks and single
+// quantities are 1-channel; per-texel parameter maps may carry many named channels (see
+// exr_io.h). Pixel (x, y) channel c lives at data[(y * width + x) * channels + c].
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "engine/core/check.h"
+
+namespace reflcap {
+
+struct Image {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  std::vector<float> data;
+
+  Image() = default;
+  Image(int w, int h, int c, float fill = 0.0f)
+      : width(w), height(h), channels(c), data(size_t(w) * size_t(h) * size_t(c), fill) {}
+
+  bool empty() const { return data.empty(); }
+  size_t PixelCount() const { return size_t(width) * size_t(height); }
+  float& at(int x, int y, int c = 0) {
+    REFLCAP_DCHECK(x >= 0 && x < width && y >= 0 && y < height && c >= 0 && c < channels);
+    return data[(size_t(y) * width + x) * channels + c];
+  }
+  float at(int x, int y, int c = 0) const {
+    REFLCAP_DCHECK(x >= 0 && x < width && y >= 0 && y < height && c >= 0 && c < channels);
+    return data[(size_t(y) * width + x) * channels + c];
+  }
+  float* pixel(int x, int y) { return &data[(size_t(y) * width + x) * channels]; }
+  const float* pixel(int x, int y) const { return &data[(size_t(y) * width + x) * channels]; }
+};
+
+// What a file's header says, read without decoding pixels (for `reflcap info`).
+struct ImageInfo {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  std::vector<std::string> channel_names;  // EXR channel names; empty for PNG
+};
+
+}  // namespace reflcap

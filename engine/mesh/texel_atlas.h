@@ -1,0 +1,65 @@
+#pragma once
+// TexelAtlas: the surface samples ("texels") that reflectance is fitted on, and their layout as an
+// image so per-texel data can be written as EXR maps.
+//
+// Mesh atlas: the UV square is rasterised at width x height; atlas pixel (x, y) covers
+// u in [x/W, (x+1)/W], v in [1-(y+1)/H, 1-y/H] (row 0 at the top = v = 1, the OBJ/PNG convention).
+// Coverage is conservative: every pixel whose square overlaps a UV triangle with positive area is
+// a texel; a pixel overlapped by several triangles is assigned to exactly one (the one containing
+// the pixel centre, else the nearest in UV), and its surface point is that triangle's point
+// nearest the pixel centre in UV (barycentrics clamped to the triangle). So no chart texel lacks a
+// surface point and no texel belongs to two charts.
+//
+// Normal-map atlas: the texels are the masked pixels of the capture's camera; layout = image.
+//
+// Each texel carries its object-frame position, unit shading normal (interpolated), unit geometric
+// normal, and a right-handed tangent frame (tangent, bitangent, normal = shading normal) in which
+// BRDF directions are expressed: z = normal, x = tangent follows increasing u (continuous within
+// a chart: per-vertex tangents accumulated from the UV parameterisation, then Gram–Schmidt).
+#include <cstdint>
+#include <vector>
+
+#include "engine/core/status.h"
+#include "engine/math/types.h"
+#include "engine/mesh/mesh.h"
+
+namespace reflcap {
+
+struct TexelAtlas {
+  int width = 0;   // layout size in pixels
+  int height = 0;
+  std::vector<int32_t> texel_of_pixel;  // width*height, -1 where no texel
+  std::vector<uint32_t> pixel_of_texel; // y*width + x for each texel
+  std::vector<Vec3f> position;          // object frame, metres
+  std::vector<Vec3f> shading_normal;    // unit
+  std::vector<Vec3f> geometric_normal;  // unit
+  std::vector<Vec3f> tangent;           // unit, orthogonal to shading_normal
+  std::vector<Vec3f> bitangent;         // unit, = shading_normal x tangent
+  std::vector<int32_t> triangle;        // source triangle, -1 for normal-map texels
+
+  size_t TexelCount() const { return pixel_of_texel.size(); }
+  int TexelAt(int x, int y) const { return texel_of_pixel[size_t(y) * width + x]; }
+  void PixelOf(size_t texel, int* x, int* y) const {
+    *x = int(pixel_of_texel[texel] % uint32_t(width));
+    *y = int(pixel_of_texel[texel] / uint32_t(width));
+  }
+  // Atlas pixel containing UV (u, v), clamped to the layout.
+  void PixelOfUv(float u, float v, int* x, int* y) const;
+};
+
+// Rasterises mesh's UV layout at width x height (each >= 1). FailedPrecondition when the mesh has
+// no UVs. Runs on all cores.
+StatusOr<TexelAtlas> BuildTexelAtlas(const TriangleMesh& mesh, int width, int height);
+
+// Texels from a normal map: one per pixel with mask > 0.5 and a finite, non-zero normal.
+// `normals` has 3 channels (unit normals, world = object frame for such captures); mask 1 channel
+// of the same size. Positions are 0 (orthographic, directional lights: position is unused).
+StatusOr<TexelAtlas> BuildNormalMapAtlas(const class Image& normals, const class Image& mask);
+
+// Counts the texels BuildTexelAtlas would produce (no per-texel data kept), for `reflcap info`.
+StatusOr<size_t> CountAtlasTexels(const TriangleMesh& mesh, int width, int height);
+
+// Default atlas resolution (square) used when a command is not told otherwise.
+constexpr int kDefaultAtlasResolution = 512;
+
+}  // namespace reflcap

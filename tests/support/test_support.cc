@@ -1,0 +1,45 @@
+#include "tests/support/test_support.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <fstream>
+
+#include "engine/core/check.h"
+
+namespace reflcap::testing {
+namespace fs = std::filesystem;
+
+ScratchDir::ScratchDir() {
+  static std::atomic<int> counter{0};
+  const char* base = std::getenv("REFLCAP_TEST_TMPDIR");
+  fs::path root = base ? fs::path(base) : fs::temp_directory_path() / "reflcap_test";
+  path_ = root / ("scratch-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+  fs::remove_all(path_);
+  fs::create_directories(path_);
+}
+
+ScratchDir::~ScratchDir() {
+  std::error_code ec;
+  fs::remove_all(path_, ec);
+}
+
+std::optional<fs::path> SharedDataDir() {
+  if (const char* env = std::getenv("REFLCAP_SHARED_DATA")) {
+    if (fs::is_directory(env)) return fs::path(env);
+    return std::nullopt;
+  }
+  fs::path candidate = fs::path(REFLCAP_SOURCE_DIR) / ".." / "shared" / "data";
+  if (fs::is_directory(candidate)) return fs::canonical(candidate);
+  return std::nullopt;
+}
+
+void WriteText(const fs::path& path, const std::string& text) {
+  fs::create_directories(path.parent_path());
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  REFLCAP_CHECK(bool(out)) << "cannot write " << path;
+}
+
+}  // namespace reflcap::testing
