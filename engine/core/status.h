@@ -79,7 +79,7 @@ Status InternalError(const Args&... args) {
 }
 
 // Process exit code for a status: 0 ok, 2 bad input (invalid/not found/corrupt/precondition),
-// 3 unavailable backend, 4 internal error. Usage errors on the command line also exit 2.
+// 3 unavailable backend, 4 internal error. (The CLI uses 1 for command-line usage errors.)
 int ExitCodeFor(const Status& status);
 
 template <typename T>

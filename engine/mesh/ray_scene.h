@@ -25,6 +25,9 @@ struct RayHit {
 class RayScene {
  public:
   // Builds the BVH (high quality build, robust intersection). The mesh is copied.
+  // InvalidArgument: no positions or no triangles, a non-finite position, an index out of range,
+  // or Embree rejecting an argument; Unavailable: Embree does not support this CPU; Internal: any
+  // other Embree error (out of memory, unknown). Embree's message is part of the status.
   static StatusOr<std::unique_ptr<RayScene>> Create(const TriangleMesh& mesh);
   ~RayScene();
 
@@ -34,7 +37,8 @@ class RayScene {
   // True when anything lies on origin + t*dir for t in [tnear, tfar].
   bool Occluded(const Vec3f& origin, const Vec3f& dir, float tnear, float tfar) const;
 
-  // 16-wide packets; lanes with valid[i] == false are ignored (their outputs untouched).
+  // 16-wide packets (rtcIntersect16 / rtcOccluded16), same results as the single-ray calls; lanes
+  // with valid[i] == false are ignored (their outputs untouched).
   void Intersect16(const std::array<bool, 16>& valid, const std::array<Vec3f, 16>& origin,
                    const std::array<Vec3f, 16>& dir, const std::array<float, 16>& tnear,
                    const std::array<float, 16>& tfar, std::array<RayHit, 16>* hits) const;

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "engine/core/status.h"
+#include "engine/image/image.h"
 #include "engine/math/types.h"
 #include "engine/mesh/mesh.h"
 
@@ -43,20 +44,28 @@ struct TexelAtlas {
     *x = int(pixel_of_texel[texel] % uint32_t(width));
     *y = int(pixel_of_texel[texel] / uint32_t(width));
   }
-  // Atlas pixel containing UV (u, v), clamped to the layout.
+  // Atlas pixel containing UV (u, v), clamped to the layout (x = floor(u W), y = floor((1-v) H));
+  // non-finite coordinates map to 0.
   void PixelOfUv(float u, float v, int* x, int* y) const;
 };
 
-// Rasterises mesh's UV layout at width x height (each >= 1). FailedPrecondition when the mesh has
-// no UVs. Runs on all cores.
+// Rasterises mesh's UV layout at width x height (each >= 1, width * height < 2^31; else
+// InvalidArgument). FailedPrecondition when the mesh has no UVs; InvalidArgument when a triangle
+// index is out of range. Triangles with zero UV area or non-finite UVs cover nothing; a mesh
+// without corner normals gets geometric ones. Texels are numbered row-major by pixel (y, then
+// x), so the numbering is deterministic. Coverage treats an overlap thinner than a few float ulps
+// of the UVs (8 * 2^-24 in UV units, see texel_atlas.cc) as touching. Runs on all cores.
 StatusOr<TexelAtlas> BuildTexelAtlas(const TriangleMesh& mesh, int width, int height);
 
-// Texels from a normal map: one per pixel with mask > 0.5 and a finite, non-zero normal.
-// `normals` has 3 channels (unit normals, world = object frame for such captures); mask 1 channel
-// of the same size. Positions are 0 (orthographic, directional lights: position is unused).
-StatusOr<TexelAtlas> BuildNormalMapAtlas(const class Image& normals, const class Image& mask);
+// Texels from a normal map: one per pixel with mask > 0.5 and a finite normal of length > 0.5
+// (normalised). `normals` has 3 channels (world = object frame for such captures); `mask` has 1
+// or more channels (channel 0 is used) and the same size; otherwise InvalidArgument. Positions
+// are 0 (orthographic, directional lights: position is unused), geometric normal = shading
+// normal, tangent frame from the normal alone (Duff et al. 2017), triangle = -1.
+StatusOr<TexelAtlas> BuildNormalMapAtlas(const Image& normals, const Image& mask);
 
-// Counts the texels BuildTexelAtlas would produce (no per-texel data kept), for `reflcap info`.
+// Counts the texels BuildTexelAtlas would produce (same coverage, no per-texel data kept), for
+// `reflcap info`. Same errors as BuildTexelAtlas.
 StatusOr<size_t> CountAtlasTexels(const TriangleMesh& mesh, int width, int height);
 
 // Default atlas resolution (square) used when a command is not told otherwise.

@@ -1,0 +1,59 @@
+#pragma once
+// Command-line plumbing shared by the `reflcap` verbs: a small declarative option parser with
+// generated --help, and the exit-code convention.
+//
+// Exit codes: 0 success; 1 command-line usage error; 2 bad input (a missing, malformed or
+// inconsistent file or field); 3 a requested backend is unavailable; 4 internal error.
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "engine/core/status.h"
+
+namespace reflcap::cli {
+
+constexpr int kExitUsage = 1;
+
+class ArgParser {
+ public:
+  ArgParser(std::string verb, std::string synopsis, std::string description);
+
+  void AddFlag(const std::string& name, bool* value, const std::string& help);
+  void AddString(const std::string& name, std::string* value, const std::string& metavar,
+                 const std::string& help);
+  void AddInt(const std::string& name, int* value, const std::string& help);
+  void AddInt64(const std::string& name, int64_t* value, const std::string& help);
+  void AddUint64(const std::string& name, uint64_t* value, const std::string& help);
+  void AddDouble(const std::string& name, double* value, const std::string& help);
+  // Positional arguments, in order.
+  void AddPositional(const std::string& name, std::string* value, const std::string& help);
+
+  // Parses argv[first..argc). Returns InvalidArgument for unknown options, missing values or
+  // positionals, and malformed numbers. Sets *help when --help/-h was given (nothing else checked).
+  Status Parse(int argc, char** argv, int first, bool* help);
+  std::string Help() const;
+
+ private:
+  struct Option {
+    std::string name, metavar, help;
+    bool is_flag = false;
+    std::function<Status(const std::string&)> set;
+  };
+  struct Positional {
+    std::string name, help;
+    std::string* value;
+  };
+  std::string verb_, synopsis_, description_;
+  std::vector<Option> options_;
+  std::vector<Positional> positionals_;
+};
+
+// Prints `status` as "reflcap <verb>: <message>" on stderr and returns its exit code.
+int ReportError(const std::string& verb, const Status& status);
+
+// Verbs.
+int RunInfo(int argc, char** argv);
+int RunSynth(int argc, char** argv);
+int RunDemo(int argc, char** argv);
+
+}  // namespace reflcap::cli

@@ -1,0 +1,606 @@
+// capture/1 reader, validator and writer. Parsing uses nlohmann::json; a small FieldReader carries
+// the file name and the JSON path ("images[3].exposure_s") so that every message names both.
+// Validation is complete and eager: the first problem found is returned.
+#include "engine/capture/capture.h"
+
+#include <cmath>
+#include <cstring>
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/atomic_file.h"
+#include "engine/image/image_io.h"
+#include "engine/image/png_io.h"
+#include "engine/image/exr_io.h"
+#include "engine/mesh/mesh_io.h"
+
+namespace reflcap {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+namespace {
+
+// Unit vectors in a file are written with >= 6 significant digits; 1e-4 accepts that rounding and
+// rejects anything a user meant as non-unit.
+constexpr double kUnitTolerance = 1e-4;
+// Rotation matrices: |RᵀR - I| and |det R - 1| below this (same rounding argument, 3x3 products).
+constexpr double kRotationTolerance = 1e-4;
+// |fx fy| below this (pixels²) makes K numerically singular.
+constexpr double kMinFocalProduct = 1e-12;
+
+// JSON has no literal for infinity; a number too large for a double (1e999) is how a non-finite
+// value reaches a file. nlohmann rejects it without naming a field, so before parsing such
+// tokens are replaced by a marker string that FieldReader reports against the field.
+constexpr char kNonFiniteMarkerJson[] = "\\u0001non-finite:";  // as written into the JSON text
+constexpr char kNonFiniteMarker[] = "\x01non-finite:";          // as the parsed string holds it
+
+std::string MarkNonFiniteNumbers(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      out += c;
+      if (c == '\\' && i + 1 < text.size()) {
+        out += text[++i];
+      } else if (c == '"') {
+        in_string = false;
+      }
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+      out += c;
+      continue;
+    }
+    if (c == '-' || (c >= '0' && c <= '9')) {
+      size_t end = i + 1;
+      while (end < text.size() && std::strchr("0123456789+-.eE", text[end])) ++end;
+      const std::string token = text.substr(i, end - i);
+      const double v = std::strtod(token.c_str(), nullptr);
+      out += std::isfinite(v) ? token : StrCat("\"", kNonFiniteMarkerJson, token, "\"");
+      i = end - 1;
+      continue;
+    }
+    out += c;
+  }
+  return out;
+}
+
+bool IsNonFinite(const Json& value) {
+  return value.is_string() && value.get<std::string>().rfind(kNonFiniteMarker, 0) == 0;
+}
+
+std::string NonFiniteToken(const Json& value) {
+  return value.get<std::string>().substr(sizeof(kNonFiniteMarker) - 1);
+}
+
+class FieldReader {
+ public:
+  FieldReader(std::string file) : file_(std::move(file)) {}
+
+  Status Error(const std::string& field, const std::string& what) const {
+    return InvalidArgumentError(file_, ": ", field, ": ", what);
+  }
+
+  // Looks up a required member of `object`.
+  StatusOr<const Json*> Required(const Json& object, const std::string& parent,
+                                 const std::string& key) const {
+    auto it = object.find(key);
+    if (it == object.end()) return Error(Join(parent, key), "missing");
+    return &*it;
+  }
+
+  StatusOr<double> Number(const Json& value, const std::string& field) const {
+    if (IsNonFinite(value)) return Error(field, StrCat("must be finite (got ", NonFiniteToken(value), ")"));
+    if (!value.is_number()) return Error(field, "must be a number");
+    const double v = value.get<double>();
+    if (!std::isfinite(v)) return Error(field, "must be finite");
+    return v;
+  }
+
+  StatusOr<int> PositiveInt(const Json& value, const std::string& field) const {
+    if (!value.is_number_integer() || value.get<int64_t>() <= 0 ||
+        value.get<int64_t>() > (1 << 20)) {
+      return Error(field, "must be a positive integer");
+    }
+    return static_cast<int>(value.get<int64_t>());
+  }
+
+  StatusOr<std::string> String(const Json& value, const std::string& field) const {
+    if (!value.is_string()) return Error(field, "must be a string");
+    std::string s = value.get<std::string>();
+    if (s.empty()) return Error(field, "must not be empty");
+    return s;
+  }
+
+  StatusOr<Vec3d> Vector3(const Json& value, const std::string& field) const {
+    if (!value.is_array() || value.size() != 3) return Error(field, "must be an array of 3 numbers");
+    Vec3d v;
+    for (int i = 0; i < 3; ++i) {
+      if (IsNonFinite(value[i])) {
+        return Error(field, StrCat("component ", i, " is not finite (", NonFiniteToken(value[i]), ")"));
+      }
+      if (!value[i].is_number()) return Error(field, "must be an array of 3 numbers");
+      v[i] = value[i].get<double>();
+      if (!std::isfinite(v[i])) return Error(field, StrCat("component ", i, " is not finite"));
+    }
+    return v;
+  }
+
+  StatusOr<Vec3d> UnitVector3(const Json& value, const std::string& field) const {
+    REFLCAP_ASSIGN_OR_RETURN(Vec3d v, Vector3(value, field));
+    if (std::abs(v.norm() - 1) > kUnitTolerance) {
+      return Error(field, StrCat("must be a unit vector (length is ", v.norm(), ")"));
+    }
+    return v.normalized();
+  }
+
+  template <int R, int C>
+  StatusOr<Eigen::Matrix<double, R, C>> Matrix(const Json& value, const std::string& field) const {
+    const std::string shape = StrCat("must be a ", R, "x", C, " array of numbers (rows)");
+    if (!value.is_array() || value.size() != R) return Error(field, shape);
+    Eigen::Matrix<double, R, C> m;
+    for (int r = 0; r < R; ++r) {
+      if (!value[r].is_array() || value[r].size() != C) return Error(field, shape);
+      for (int c = 0; c < C; ++c) {
+        if (IsNonFinite(value[r][c])) {
+          return Error(field, StrCat("element [", r, "][", c, "] is not finite (",
+                                     NonFiniteToken(value[r][c]), ")"));
+        }
+        if (!value[r][c].is_number()) return Error(field, shape);
+        m(r, c) = value[r][c].get<double>();
+        if (!std::isfinite(m(r, c))) return Error(field, StrCat("element [", r, "][", c, "] is not finite"));
+      }
+    }
+    return m;
+  }
+
+  static std::string Join(const std::string& parent, const std::string& key) {
+    return parent.empty() ? key : parent + "." + key;
+  }
+
+ private:
+  std::string file_;
+};
+
+// "capture/1" -> minor 0, "capture/1.2" -> minor 2; anything else is an error naming `format`.
+StatusOr<int> ParseFormat(const FieldReader& r, const Json& root) {
+  REFLCAP_ASSIGN_OR_RETURN(const Json* f, r.Required(root, "", "format"));
+  REFLCAP_ASSIGN_OR_RETURN(std::string format, r.String(*f, "format"));
+  const std::string prefix = "capture/";
+  if (format.rfind(prefix, 0) != 0) {
+    return r.Error("format", StrCat("\"", format, "\" is not a capture format (expected \"capture/1\")"));
+  }
+  const std::string version = format.substr(prefix.size());
+  const size_t dot = version.find('.');
+  const std::string major = version.substr(0, dot);
+  if (major.empty() || major.find_first_not_of("0123456789") != std::string::npos) {
+    return r.Error("format", StrCat("malformed version \"", format, "\""));
+  }
+  if (major != "1") {
+    return r.Error("format", StrCat("unsupported major version ", major,
+                                    " (this reflcap reads capture/1)"));
+  }
+  if (dot == std::string::npos) return 0;
+  const std::string minor = version.substr(dot + 1);
+  if (minor.empty() || minor.find_first_not_of("0123456789") != std::string::npos) {
+    return r.Error("format", StrCat("malformed version \"", format, "\""));
+  }
+  return std::stoi(minor);
+}
+
+StatusOr<Camera> ParseCamera(const FieldReader& r, const Json& j, const std::string& at) {
+  if (!j.is_object()) return r.Error(at, "must be an object");
+  Camera cam;
+  REFLCAP_ASSIGN_OR_RETURN(const Json* id, r.Required(j, at, "id"));
+  REFLCAP_ASSIGN_OR_RETURN(cam.id, r.String(*id, at + ".id"));
+  REFLCAP_ASSIGN_OR_RETURN(const Json* w, r.Required(j, at, "width"));
+  REFLCAP_ASSIGN_OR_RETURN(cam.width, r.PositiveInt(*w, at + ".width"));
+  REFLCAP_ASSIGN_OR_RETURN(const Json* h, r.Required(j, at, "height"));
+  REFLCAP_ASSIGN_OR_RETURN(cam.height, r.PositiveInt(*h, at + ".height"));
+  std::string model = "pinhole";
+  if (auto it = j.find("model"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(model, r.String(*it, at + ".model"));
+  }
+  if (model == "pinhole") {
+    cam.model = CameraModel::kPinhole;
+    REFLCAP_ASSIGN_OR_RETURN(const Json* k, r.Required(j, at, "K"));
+    REFLCAP_ASSIGN_OR_RETURN(cam.K, (r.Matrix<3, 3>(*k, at + ".K")));
+    if (cam.K(1, 0) != 0 || cam.K(2, 0) != 0 || cam.K(2, 1) != 0 || cam.K(2, 2) != 1) {
+      return r.Error(at + ".K", "must have the form [[fx,s,cx],[0,fy,cy],[0,0,1]]");
+    }
+    if (std::abs(cam.K(0, 0) * cam.K(1, 1)) < kMinFocalProduct) {
+      return r.Error(at + ".K", StrCat("not invertible (fx*fy = ", cam.K(0, 0) * cam.K(1, 1), ")"));
+    }
+    if (cam.K(0, 0) < 0 || cam.K(1, 1) < 0) {
+      return r.Error(at + ".K", "focal lengths fx and fy must be positive");
+    }
+  } else if (model == "orthographic") {
+    cam.model = CameraModel::kOrthographic;
+    if (auto it = j.find("pixel_size_m"); it != j.end()) {
+      REFLCAP_ASSIGN_OR_RETURN(cam.pixel_size_m, r.Number(*it, at + ".pixel_size_m"));
+      if (cam.pixel_size_m <= 0) return r.Error(at + ".pixel_size_m", "must be positive");
+    }
+  } else {
+    return r.Error(at + ".model", StrCat("unknown camera model \"", model,
+                                         "\" (expected \"pinhole\" or \"orthographic\")"));
+  }
+  if (auto it = j.find("dist"); it != j.end()) {
+    const Json& d = *it;
+    if (!d.is_array() || (d.size() != 4 && d.size() != 5)) {
+      return r.Error(at + ".dist", "must be [k1,k2,p1,p2] or [k1,k2,p1,p2,k3]");
+    }
+    for (size_t i = 0; i < d.size(); ++i) {
+      REFLCAP_ASSIGN_OR_RETURN(cam.dist[i], r.Number(d[i], StrCat(at, ".dist[", i, "]")));
+    }
+    if (cam.model == CameraModel::kOrthographic && cam.HasDistortion()) {
+      return r.Error(at + ".dist", "orthographic cameras take no distortion");
+    }
+  }
+  REFLCAP_ASSIGN_OR_RETURN(const Json* m, r.Required(j, at, "cam_from_world"));
+  REFLCAP_ASSIGN_OR_RETURN(Mat4d mat, (r.Matrix<4, 4>(*m, at + ".cam_from_world")));
+  if ((mat.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 0) {
+    return r.Error(at + ".cam_from_world", "last row must be [0,0,0,1]");
+  }
+  cam.cam_from_world = Rigid3::FromMatrix(mat);
+  const Mat3d& rot = cam.cam_from_world.rotation;
+  if ((rot.transpose() * rot - Mat3d::Identity()).cwiseAbs().maxCoeff() > kRotationTolerance ||
+      std::abs(rot.determinant() - 1) > kRotationTolerance) {
+    return r.Error(at + ".cam_from_world", "rotation part is not a proper rotation (RᵀR ≠ I or det ≠ 1)");
+  }
+  // Re-orthonormalise the rotation so rounding in the file does not accumulate downstream.
+  Eigen::JacobiSVD<Mat3d> svd(rot, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  cam.cam_from_world.rotation = svd.matrixU() * svd.matrixV().transpose();
+  return cam;
+}
+
+StatusOr<Light> ParseLight(const FieldReader& r, const Json& j, const std::string& at) {
+  if (!j.is_object()) return r.Error(at, "must be an object");
+  Light light;
+  REFLCAP_ASSIGN_OR_RETURN(const Json* id, r.Required(j, at, "id"));
+  REFLCAP_ASSIGN_OR_RETURN(light.id, r.String(*id, at + ".id"));
+  REFLCAP_ASSIGN_OR_RETURN(const Json* type, r.Required(j, at, "type"));
+  REFLCAP_ASSIGN_OR_RETURN(std::string type_name, r.String(*type, at + ".type"));
+  if (type_name == "point") {
+    light.type = LightType::kPoint;
+    REFLCAP_ASSIGN_OR_RETURN(const Json* p, r.Required(j, at, "position"));
+    REFLCAP_ASSIGN_OR_RETURN(light.position, r.Vector3(*p, at + ".position"));
+  } else if (type_name == "directional") {
+    light.type = LightType::kDirectional;
+    REFLCAP_ASSIGN_OR_RETURN(const Json* d, r.Required(j, at, "direction"));
+    REFLCAP_ASSIGN_OR_RETURN(light.direction, r.UnitVector3(*d, at + ".direction"));
+  } else {
+    return r.Error(at + ".type", StrCat("unknown light type \"", type_name,
+                                        "\" (expected \"point\" or \"directional\")"));
+  }
+  REFLCAP_ASSIGN_OR_RETURN(const Json* intensity, r.Required(j, at, "intensity"));
+  REFLCAP_ASSIGN_OR_RETURN(light.intensity, r.Vector3(*intensity, at + ".intensity"));
+  if (light.intensity.minCoeff() < 0) return r.Error(at + ".intensity", "must not be negative");
+  return light;
+}
+
+StatusOr<CaptureImage> ParseImage(const FieldReader& r, const Json& j, const std::string& at,
+                                  const Capture& capture) {
+  if (!j.is_object()) return r.Error(at, "must be an object");
+  CaptureImage image;
+  REFLCAP_ASSIGN_OR_RETURN(const Json* file, r.Required(j, at, "file"));
+  REFLCAP_ASSIGN_OR_RETURN(image.file, r.String(*file, at + ".file"));
+  REFLCAP_ASSIGN_OR_RETURN(const Json* cam, r.Required(j, at, "camera"));
+  REFLCAP_ASSIGN_OR_RETURN(std::string cam_id, r.String(*cam, at + ".camera"));
+  image.camera = capture.FindCamera(cam_id);
+  if (image.camera < 0) return r.Error(at + ".camera", StrCat("unknown camera id \"", cam_id, "\""));
+  REFLCAP_ASSIGN_OR_RETURN(const Json* light, r.Required(j, at, "light"));
+  REFLCAP_ASSIGN_OR_RETURN(std::string light_id, r.String(*light, at + ".light"));
+  image.light = capture.FindLight(light_id);
+  if (image.light < 0) return r.Error(at + ".light", StrCat("unknown light id \"", light_id, "\""));
+  if (auto it = j.find("turntable_deg"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(image.turntable_deg, r.Number(*it, at + ".turntable_deg"));
+  }
+  if (auto it = j.find("exposure_s"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(image.exposure_s, r.Number(*it, at + ".exposure_s"));
+    if (image.exposure_s <= 0) {
+      return r.Error(at + ".exposure_s", StrCat("must be positive (got ", image.exposure_s, ")"));
+    }
+  }
+  std::string split = "train";
+  if (auto it = j.find("split"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(split, r.String(*it, at + ".split"));
+  }
+  if (split == "train") {
+    image.split = Split::kTrain;
+  } else if (split == "holdout") {
+    image.split = Split::kHoldout;
+  } else {
+    return r.Error(at + ".split", StrCat("unknown split \"", split, "\" (expected \"train\" or \"holdout\")"));
+  }
+  if (auto it = j.find("saturation"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(image.saturation, r.Number(*it, at + ".saturation"));
+    if (image.saturation < 0) return r.Error(at + ".saturation", "must not be negative");
+  }
+  return image;
+}
+
+// 1-based line and column of a byte offset.
+void LineAndColumn(const std::string& text, size_t byte, size_t* line, size_t* column) {
+  *line = 1;
+  *column = 1;
+  for (size_t i = 0; i < byte && i < text.size(); ++i) {
+    if (text[i] == '\n') {
+      ++*line;
+      *column = 1;
+    } else {
+      ++*column;
+    }
+  }
+}
+
+Status CheckUniqueIds(const FieldReader& r, const std::vector<std::string>& ids,
+                      const std::string& array) {
+  std::set<std::string> seen;
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (!seen.insert(ids[i]).second) {
+      return r.Error(StrCat(array, "[", i, "].id"), StrCat("duplicate id \"", ids[i], "\""));
+    }
+  }
+  return OkStatus();
+}
+
+}  // namespace
+
+const char* SplitName(Split split) { return split == Split::kTrain ? "train" : "holdout"; }
+
+Rigid3 Capture::WorldFromObject(const CaptureImage& image) const {
+  return turntable ? turntable->WorldFromObject(image.turntable_deg) : Rigid3();
+}
+
+int Capture::FindCamera(const std::string& id) const {
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    if (cameras[i].id == id) return int(i);
+  }
+  return -1;
+}
+
+int Capture::FindLight(const std::string& id) const {
+  for (size_t i = 0; i < lights.size(); ++i) {
+    if (lights[i].id == id) return int(i);
+  }
+  return -1;
+}
+
+size_t Capture::CountSplit(Split split) const {
+  size_t n = 0;
+  for (const auto& image : images) n += image.split == split;
+  return n;
+}
+
+StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
+  const std::string file = name.string();
+  FieldReader r(file);
+  Json root;
+  try {
+    root = Json::parse(MarkNonFiniteNumbers(text));
+  } catch (const Json::parse_error& e) {
+    size_t line, column;
+    LineAndColumn(text, e.byte > 0 ? e.byte - 1 : 0, &line, &column);
+    std::string what = e.what();
+    // nlohmann prefixes "[json.exception.parse_error.101] parse error at line L, column C: ".
+    const size_t colon = what.find(": ");
+    if (colon != std::string::npos) what = what.substr(colon + 2);
+    return InvalidArgumentError(file, ":", line, ":", column, ": JSON syntax error: ", what);
+  } catch (const Json::exception& e) {
+    return InvalidArgumentError(file, ": JSON error: ", e.what());
+  }
+  if (!root.is_object()) return r.Error("(root)", "must be a JSON object");
+
+  Capture capture;
+  capture.json_path = name;
+  REFLCAP_ASSIGN_OR_RETURN(capture.minor_version, ParseFormat(r, root));
+
+  REFLCAP_ASSIGN_OR_RETURN(const Json* cameras, r.Required(root, "", "cameras"));
+  if (!cameras->is_array() || cameras->empty()) return r.Error("cameras", "must be a non-empty array");
+  std::vector<std::string> ids;
+  for (size_t i = 0; i < cameras->size(); ++i) {
+    REFLCAP_ASSIGN_OR_RETURN(Camera cam, ParseCamera(r, (*cameras)[i], StrCat("cameras[", i, "]")));
+    ids.push_back(cam.id);
+    capture.cameras.push_back(std::move(cam));
+  }
+  REFLCAP_RETURN_IF_ERROR(CheckUniqueIds(r, ids, "cameras"));
+
+  REFLCAP_ASSIGN_OR_RETURN(const Json* lights, r.Required(root, "", "lights"));
+  if (!lights->is_array() || lights->empty()) return r.Error("lights", "must be a non-empty array");
+  ids.clear();
+  for (size_t i = 0; i < lights->size(); ++i) {
+    REFLCAP_ASSIGN_OR_RETURN(Light light, ParseLight(r, (*lights)[i], StrCat("lights[", i, "]")));
+    ids.push_back(light.id);
+    capture.lights.push_back(std::move(light));
+  }
+  REFLCAP_RETURN_IF_ERROR(CheckUniqueIds(r, ids, "lights"));
+
+  const bool has_mesh = root.contains("mesh");
+  const bool has_normal_map = root.contains("normal_map");
+  if (has_mesh == has_normal_map) {
+    return r.Error(has_mesh ? "mesh" : "(root)",
+                   "exactly one of \"mesh\" and \"normal_map\" must be given");
+  }
+  if (has_mesh) {
+    REFLCAP_ASSIGN_OR_RETURN(capture.mesh, r.String(root["mesh"], "mesh"));
+  } else {
+    const Json& nm = root["normal_map"];
+    if (!nm.is_object()) return r.Error("normal_map", "must be an object");
+    NormalMapGeometry g;
+    REFLCAP_ASSIGN_OR_RETURN(const Json* cam, r.Required(nm, "normal_map", "camera"));
+    REFLCAP_ASSIGN_OR_RETURN(std::string cam_id, r.String(*cam, "normal_map.camera"));
+    g.camera = capture.FindCamera(cam_id);
+    if (g.camera < 0) return r.Error("normal_map.camera", StrCat("unknown camera id \"", cam_id, "\""));
+    REFLCAP_ASSIGN_OR_RETURN(const Json* normals, r.Required(nm, "normal_map", "normals"));
+    REFLCAP_ASSIGN_OR_RETURN(g.normals, r.String(*normals, "normal_map.normals"));
+    REFLCAP_ASSIGN_OR_RETURN(const Json* mask, r.Required(nm, "normal_map", "mask"));
+    REFLCAP_ASSIGN_OR_RETURN(g.mask, r.String(*mask, "normal_map.mask"));
+    capture.normal_map = g;
+  }
+
+  if (auto it = root.find("turntable"); it != root.end() && !it->is_null()) {
+    if (!it->is_object()) return r.Error("turntable", "must be an object");
+    Turntable t;
+    REFLCAP_ASSIGN_OR_RETURN(const Json* axis, r.Required(*it, "turntable", "axis"));
+    REFLCAP_ASSIGN_OR_RETURN(t.axis, r.UnitVector3(*axis, "turntable.axis"));
+    REFLCAP_ASSIGN_OR_RETURN(const Json* point, r.Required(*it, "turntable", "point"));
+    REFLCAP_ASSIGN_OR_RETURN(t.point, r.Vector3(*point, "turntable.point"));
+    capture.turntable = t;
+  }
+
+  REFLCAP_ASSIGN_OR_RETURN(const Json* images, r.Required(root, "", "images"));
+  if (!images->is_array()) return r.Error("images", "must be an array");
+  if (images->empty()) return r.Error("images", "the image list is empty");
+  for (size_t i = 0; i < images->size(); ++i) {
+    const std::string at = StrCat("images[", i, "]");
+    REFLCAP_ASSIGN_OR_RETURN(CaptureImage image, ParseImage(r, (*images)[i], at, capture));
+    if (!capture.turntable && image.turntable_deg != 0) {
+      return r.Error(at + ".turntable_deg", "non-zero angle but the capture has no turntable");
+    }
+    capture.images.push_back(std::move(image));
+  }
+
+  if (auto it = root.find("ground_truth"); it != root.end()) capture.ground_truth_json = it->dump();
+  return capture;
+}
+
+StatusOr<Capture> ReadCapture(const fs::path& json_path) {
+  std::error_code ec;
+  if (fs::is_directory(json_path, ec)) return ReadCapture(json_path / "capture.json");
+  auto text = ReadTextFile(json_path);
+  if (!text.ok()) return NotFoundError(json_path.string(), ": cannot open capture file");
+  return ParseCapture(*text, json_path);
+}
+
+Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) {
+  const std::string file = capture.json_path.string();
+  auto field_error = [&](const std::string& field, const Status& cause) {
+    return Status(cause.code(), StrCat(file, ": ", field, ": ", cause.message()));
+  };
+  CaptureFilesReport local;
+  CaptureFilesReport& out = report ? *report : local;
+  if (!capture.mesh.empty()) {
+    MeshLoadStats stats;
+    auto mesh = LoadMesh(capture.Resolve(capture.mesh), &stats);
+    if (!mesh.ok()) return field_error("mesh", mesh.status());
+    out.mesh_vertices = mesh->positions.size();
+    out.mesh_triangles = mesh->triangles.size();
+    out.mesh_degenerate_skipped = stats.degenerate_skipped;
+  } else {
+    const NormalMapGeometry& g = *capture.normal_map;
+    const Camera& cam = capture.cameras[g.camera];
+    auto normals = ReadExrInfo(capture.Resolve(g.normals));
+    if (!normals.ok()) return field_error("normal_map.normals", normals.status());
+    if (normals->width != cam.width || normals->height != cam.height) {
+      return InvalidArgumentError(file, ": normal_map.normals: ", g.normals, " is ", normals->width,
+                                  "x", normals->height, " but camera \"", cam.id, "\" is ",
+                                  cam.width, "x", cam.height);
+    }
+    auto mask = ReadPng(capture.Resolve(g.mask));
+    if (!mask.ok()) return field_error("normal_map.mask", mask.status());
+    if (mask->width != cam.width || mask->height != cam.height) {
+      return InvalidArgumentError(file, ": normal_map.mask: ", g.mask, " is ", mask->width, "x",
+                                  mask->height, " but camera \"", cam.id, "\" is ", cam.width,
+                                  "x", cam.height);
+    }
+    size_t count = 0;
+    for (size_t p = 0; p < mask->PixelCount(); ++p) count += mask->data[p * mask->channels] > 0;
+    out.normal_map_texels = count;
+  }
+  for (size_t i = 0; i < capture.images.size(); ++i) {
+    const CaptureImage& image = capture.images[i];
+    const std::string field = StrCat("images[", i, "].file");
+    auto info = ReadImageInfo(capture.Resolve(image.file));
+    if (!info.ok()) return field_error(field, info.status());
+    const Camera& cam = capture.cameras[image.camera];
+    if (info->width != cam.width || info->height != cam.height) {
+      return InvalidArgumentError(file, ": ", field, ": ", image.file, " is ", info->width, "x",
+                                  info->height, " but camera \"", cam.id, "\" is ", cam.width,
+                                  "x", cam.height);
+    }
+    ++out.images_checked;
+  }
+  return OkStatus();
+}
+
+namespace {
+Json MatrixJson(const Eigen::MatrixXd& m) {
+  Json rows = Json::array();
+  for (int r = 0; r < m.rows(); ++r) {
+    Json row = Json::array();
+    for (int c = 0; c < m.cols(); ++c) row.push_back(m(r, c));
+    rows.push_back(row);
+  }
+  return rows;
+}
+Json VecJson(const Vec3d& v) { return Json::array({v.x(), v.y(), v.z()}); }
+}  // namespace
+
+std::string CaptureToJson(const Capture& capture) {
+  Json root = Json::object();
+  root["format"] = capture.minor_version ? StrCat("capture/1.", capture.minor_version) : "capture/1";
+  if (capture.normal_map) {
+    const auto& g = *capture.normal_map;
+    root["normal_map"] = {{"camera", capture.cameras[g.camera].id},
+                          {"normals", g.normals},
+                          {"mask", g.mask}};
+  } else {
+    root["mesh"] = capture.mesh;
+  }
+  Json cameras = Json::array();
+  for (const Camera& cam : capture.cameras) {
+    Json j = {{"id", cam.id}, {"width", cam.width}, {"height", cam.height}};
+    if (cam.model == CameraModel::kOrthographic) {
+      j["model"] = "orthographic";
+      if (cam.pixel_size_m > 0) j["pixel_size_m"] = cam.pixel_size_m;
+    } else {
+      j["K"] = MatrixJson(cam.K);
+      j["dist"] = Json(std::vector<double>(cam.dist.begin(), cam.dist.end()));
+    }
+    j["cam_from_world"] = MatrixJson(cam.cam_from_world.ToMatrix());
+    cameras.push_back(j);
+  }
+  root["cameras"] = cameras;
+  Json lights = Json::array();
+  for (const Light& light : capture.lights) {
+    Json j = {{"id", light.id}};
+    if (light.type == LightType::kPoint) {
+      j["type"] = "point";
+      j["position"] = VecJson(light.position);
+    } else {
+      j["type"] = "directional";
+      j["direction"] = VecJson(light.direction);
+    }
+    j["intensity"] = VecJson(light.intensity);
+    lights.push_back(j);
+  }
+  root["lights"] = lights;
+  if (capture.turntable) {
+    root["turntable"] = {{"axis", VecJson(capture.turntable->axis)},
+                         {"point", VecJson(capture.turntable->point)}};
+  }
+  Json images = Json::array();
+  for (const CaptureImage& image : capture.images) {
+    Json j = {{"file", image.file},
+              {"camera", capture.cameras[image.camera].id},
+              {"light", capture.lights[image.light].id},
+              {"turntable_deg", image.turntable_deg},
+              {"exposure_s", image.exposure_s},
+              {"split", SplitName(image.split)}};
+    if (image.saturation > 0) j["saturation"] = image.saturation;
+    images.push_back(j);
+  }
+  root["images"] = images;
+  if (!capture.ground_truth_json.empty()) root["ground_truth"] = Json::parse(capture.ground_truth_json);
+  return root.dump(2) + "\n";
+}
+
+Status WriteCapture(const Capture& capture, const fs::path& json_path) {
+  return WriteTextFileAtomic(json_path, CaptureToJson(capture));
+}
+
+}  // namespace reflcap
