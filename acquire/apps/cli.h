@@ -55,5 +55,7 @@ int ReportError(const std::string& verb, const Status& status);
 int RunInfo(int argc, char** argv);
 int RunSynth(int argc, char** argv);
 int RunDemo(int argc, char** argv);
+int RunResample(int argc, char** argv);  // verb_resample.cc
+int RunFit(int argc, char** argv);       // verb_fit.cc
 
 }  // namespace reflcap::cli

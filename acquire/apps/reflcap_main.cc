@@ -15,6 +15,8 @@ constexpr char kUsage[] =
     "  info CAPTURE        validate a capture/1 dataset completely and summarise it\n"
     "  synth --out DIR     write a synthetic capture with ground truth\n"
     "  demo [--out DIR]    run the pipeline end to end on a small synthetic capture\n"
+    "  resample CAPTURE --out SAMPLES   photographs -> per-texel BRDF samples\n"
+    "  fit SAMPLES --out FIT            per-texel Lambert + Lafortune fit\n"
     "\n"
     "global options: --quiet (warnings and errors only), --version\n"
     "exit codes: 0 ok, 1 usage error, 2 bad input, 3 backend unavailable, 4 internal error\n";
@@ -46,6 +48,8 @@ int main(int argc, char** argv) {
   if (verb == "info") return cli::RunInfo(argc, argv);
   if (verb == "synth") return cli::RunSynth(argc, argv);
   if (verb == "demo") return cli::RunDemo(argc, argv);
+  if (verb == "resample") return cli::RunResample(argc, argv);
+  if (verb == "fit") return cli::RunFit(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }

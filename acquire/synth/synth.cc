@@ -262,10 +262,13 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
   // Six charts of (1 - 2 gutter) / 3 of the atlas side each: resolution for the target count.
   const int atlas_res = std::max(
       8, int(std::ceil(3 * std::sqrt(double(target_texels) / 6) / (1 - 2 * kChartGutter))));
-  // Enough quads per face that a quad spans <= ~6 texels, capped by the preset's mesh budget.
-  const int face_res = std::clamp(atlas_res / 18, 8, std::max(8, preset.face_resolution));
+
+  const int face_res = preset.face_resolution;
 
   SynthSummary summary;
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) return InternalError(out.string(), ": cannot create folder: ", ec.message());
   TriangleMesh mesh = MakeReliefObject(face_res, options.seed);
   summary.triangles = mesh.triangles.size();
   REFLCAP_RETURN_IF_ERROR(WriteObj(out / "mesh.obj", mesh));

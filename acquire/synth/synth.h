@@ -53,7 +53,7 @@ struct SynthSummary {
   double seconds = 0;
 };
 
-// Writes the capture into `out_dir` (an existing, empty folder; the caller stages and commits).
+// Writes the capture into `out_dir` (created if missing; the caller stages and commits it).
 StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options,
                                              const std::filesystem::path& out_dir);
 

@@ -1,0 +1,1 @@
+// Placeholder until the fitting engine lands.
