@@ -57,5 +57,8 @@ int RunSynth(int argc, char** argv);
 int RunDemo(int argc, char** argv);
 int RunResample(int argc, char** argv);  // verb_resample.cc
 int RunFit(int argc, char** argv);       // verb_fit.cc
+int RunRender(int argc, char** argv);    // verb_render.cc
+int RunValidate(int argc, char** argv);  // verb_validate.cc
+int RunImportDiligent(int argc, char** argv);  // verb_import_diligent.cc
 
 }  // namespace reflcap::cli

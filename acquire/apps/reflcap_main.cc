@@ -17,6 +17,9 @@ constexpr char kUsage[] =
     "  demo [--out DIR]    run the pipeline end to end on a small synthetic capture\n"
     "  resample CAPTURE --out SAMPLES   photographs -> per-texel BRDF samples\n"
     "  fit SAMPLES --out FIT            per-texel Lambert + Lafortune fit\n"
+    "  render CAPTURE FIT --out DIR     re-render photographs from a fit\n"
+    "  validate CAPTURE RENDERS --out REPORT   compare re-renders with photographs\n"
+    "  import-diligent OBJECT_DIR --out CAPTURE   DiLiGenT object -> capture/1\n"
     "\n"
     "global options: --quiet (warnings and errors only), --version\n"
     "exit codes: 0 ok, 1 usage error, 2 bad input, 3 backend unavailable, 4 internal error\n";
@@ -50,6 +53,9 @@ int main(int argc, char** argv) {
   if (verb == "demo") return cli::RunDemo(argc, argv);
   if (verb == "resample") return cli::RunResample(argc, argv);
   if (verb == "fit") return cli::RunFit(argc, argv);
+  if (verb == "render") return cli::RunRender(argc, argv);
+  if (verb == "validate") return cli::RunValidate(argc, argv);
+  if (verb == "import-diligent") return cli::RunImportDiligent(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }

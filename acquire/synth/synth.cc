@@ -169,30 +169,25 @@ constexpr const char* kMaterialNames[kMaterialCount] = {"matte", "glossy", "shar
                                                         "anisotropic", "coloured_texture",
                                                         "coloured_lobe"};
 
-// A mirror-direction Lafortune lobe whose value at the mirror direction is `peak`:
-// Cx = Cy = -c·(1 ∓ aniso), Cz = c, c = peak^(1/n).
-brdf::LobeParams Lobe(double peak, double n, double aniso_x = 0, double aniso_y = 0) {
-  const double c = std::pow(peak, 1.0 / n);
-  return {float(-c * (1 - aniso_x)), float(-c * (1 + aniso_y)), float(c), float(n)};
-}
-
 // Normalised-Phong-like peak for a lobe of specular albedo ks: ks (n + 2) / (2π).
 double Peak(double ks, double n) { return ks * (n + 2) / (2 * kPi); }
 
 brdf::BrdfParams MaterialParams(int material, const Vec3d& p_in_object) {
   brdf::BrdfParams p;
   p.num_lobes = 1;
-  auto set = [&](Vec3d rho, Vec3d ks, double n, double ax = 0, double ay = 0) {
+  // `anisotropy` a: Cx = -c a, Cy = -c / a (brdf::MirrorLobe); 1 = isotropic.
+  auto set = [&](Vec3d rho, Vec3d ks, double n, double anisotropy = 1) {
     for (int c = 0; c < 3; ++c) {
       p.rho_d[c] = float(rho[c]);
-      p.lobes[0][c] = ks[c] > 0 ? Lobe(Peak(ks[c], n), n, ax, ay) : brdf::LobeParams{0, 0, 0, 1};
+      p.lobes[0][c] = ks[c] > 0 ? brdf::MirrorLobe(Peak(ks[c], n), n, anisotropy)
+                                : brdf::LobeParams{0, 0, 0, 1};
     }
   };
   switch (material) {
     case kMatte: set({0.60, 0.55, 0.50}, {0, 0, 0}, 1); break;
     case kGlossy: set({0.25, 0.35, 0.60}, {0.35, 0.35, 0.35}, 25); break;
     case kSharp: set({0.50, 0.15, 0.10}, {0.5, 0.5, 0.5}, 250); break;
-    case kAnisotropic: set({0.30, 0.50, 0.30}, {0.3, 0.3, 0.3}, 40, 0.015, 0.015); break;
+    case kAnisotropic: set({0.30, 0.50, 0.30}, {0.3, 0.3, 0.3}, 40, 0.985); break;
     case kTextured: {
       // Stripes in object space between two colours, soft-edged so the map is not aliased.
       const double s = 0.5 + 0.5 * std::tanh(6 * std::sin(p_in_object.x() * 90 + p_in_object.z() * 60));

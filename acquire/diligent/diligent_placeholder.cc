@@ -1,0 +1,1 @@
+// Placeholder until the DiLiGenT importer lands.
