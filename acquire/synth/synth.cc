@@ -210,14 +210,7 @@ Camera ArcCamera(const std::string& id, double elevation_deg, const Vec3d& targe
   cam.K << focal_px, 0, 0.5 * (size - 1), 0, focal_px, 0.5 * (size - 1), 0, 0, 1;
   const double el = DegToRad(elevation_deg);
   const Vec3d eye = target + kCameraDistance * Vec3d(std::cos(el), 0, std::sin(el));
-  const Vec3d z = (target - eye).normalized();
-  const Vec3d x = z.cross(Vec3d::UnitZ()).normalized();
-  const Vec3d y = z.cross(x);
-  Mat3d r;
-  r.row(0) = x.transpose();
-  r.row(1) = y.transpose();
-  r.row(2) = z.transpose();
-  cam.cam_from_world = {r, -(r * eye)};
+  cam.cam_from_world = CamFromWorldLookAt(eye, target);
   return cam;
 }
 

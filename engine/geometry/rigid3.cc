@@ -22,6 +22,17 @@ std::string Rigid3::ToString() const {
   return out.str();
 }
 
+Rigid3 CamFromWorldLookAt(const Vec3d& eye, const Vec3d& target, const Vec3d& up) {
+  const Vec3d z = (target - eye).normalized();
+  const Vec3d x = z.cross(up).normalized();  // image right
+  const Vec3d y = z.cross(x);                // image down
+  Mat3d r;
+  r.row(0) = x.transpose();
+  r.row(1) = y.transpose();
+  r.row(2) = z.transpose();
+  return {r, -(r * eye)};
+}
+
 Mat3d AxisAngleRotation(const Vec3d& axis, double angle_rad) {
   return Eigen::AngleAxisd(angle_rad, axis.normalized()).toRotationMatrix();
 }

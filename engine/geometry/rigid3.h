@@ -25,6 +25,10 @@ struct Rigid3 {
   std::string ToString() const;
 };
 
+// The OpenCV-convention camera pose (+x right, +y down, +z forward) of a camera at `eye` looking at
+// `target`, with `up` (world) pointing up in the image. eye != target; up not parallel to the view.
+Rigid3 CamFromWorldLookAt(const Vec3d& eye, const Vec3d& target, const Vec3d& up = Vec3d::UnitZ());
+
 // Rotation by angle_rad about the unit `axis`, right-hand rule.
 Mat3d AxisAngleRotation(const Vec3d& axis, double angle_rad);
 

@@ -24,5 +24,18 @@ TEST(Turntable, RotatesRightHandedAboutItsPoint) {
   EXPECT_LT((t.WorldFromObject(0).ToMatrix() - Mat4d::Identity()).norm(), 1e-15);
 }
 
+TEST(CamFromWorldLookAt, LooksAtTargetWithUpUpInTheImage) {
+  const Vec3d eye(2, 1, 0.5), target(0, 0, 0.2);
+  const Rigid3 cam_from_world = CamFromWorldLookAt(eye, target);
+  EXPECT_LT((cam_from_world * eye).norm(), 1e-12);
+  const Vec3d t = cam_from_world * target;
+  EXPECT_NEAR(t.x(), 0, 1e-12);
+  EXPECT_NEAR(t.y(), 0, 1e-12);
+  EXPECT_GT(t.z(), 0);
+  // A point above the target appears above it in the image (smaller y, OpenCV +y down).
+  EXPECT_LT((cam_from_world * (target + Vec3d::UnitZ())).y(), 0);
+  EXPECT_NEAR(cam_from_world.rotation.determinant(), 1, 1e-12);
+}
+
 }  // namespace
 }  // namespace reflcap

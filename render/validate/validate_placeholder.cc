@@ -1,1 +1,0 @@
-// Placeholder until validation lands.
