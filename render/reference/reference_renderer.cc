@@ -1,7 +1,9 @@
 // CPU reference renderer (see reference_renderer.h). Rows are shaded in parallel; each sample is
-// one closest-hit ray and, when the point faces the light, one occlusion ray.
+// one closest-hit ray and, when the point faces the light, one occlusion ray. Normal-map captures
+// are shaded per texel, without rays.
 #include "render/reference/reference_renderer.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -77,67 +79,248 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& came
   const float offset = scene.SurfaceOffset();
   const int n = options.supersampling;
   const float sample_weight = float(exposure_s) / float(n * n);
+  std::vector<float> curvature;
+  if (options.aux_buffers) curvature = SurfaceCurvature(mesh);
+
+  // Traces the ray through (px, py) and returns its radiance contribution f E cos θi (before
+  // exposure); fills `aux` (kAuxChannelCount floats, zero on entry) when given. Returns false on a
+  // miss.
+  auto shade = [&](double px, double py, Vec3f* radiance, float* aux) {
+    *radiance = Vec3f::Zero();
+    Vec3f origin, dir;
+    rays.Ray(px, py, &origin, &dir);
+    const RayHit hit = scene.Intersect(origin, dir, 0, kInfinity);
+    if (!hit.hit) return false;
+    const auto& tri = mesh.triangles[hit.triangle];
+    const float b0 = 1 - hit.b1 - hit.b2;
+    const Vec3f p = b0 * mesh.positions[tri[0]] + hit.b1 * mesh.positions[tri[1]] +
+                    hit.b2 * mesh.positions[tri[2]];
+    const Vec3f n_g = mesh.GeometricNormal(hit.triangle);
+    const auto& cn = mesh.corner_normals[hit.triangle];
+    const Vec3f n_s = (b0 * cn[0] + hit.b1 * cn[1] + hit.b2 * cn[2]).normalized();
+    const Vec3f wo = -dir;
+    Vec3f wi;
+    float dist = kInfinity;
+    Vec3f irradiance_per_cos = intensity;
+    if (point_light) {
+      const Vec3f to_light = light_in_object - p;
+      dist = to_light.norm();
+      wi = to_light / dist;
+      irradiance_per_cos /= dist * dist;
+    } else {
+      wi = light_dir_in_object;
+    }
+    const float cos_i = n_s.dot(wi);
+    if (aux) {
+      aux[kAuxMask] = 1;
+      aux[kAuxCosThetaI] = cos_i;
+      aux[kAuxCosThetaO] = n_s.dot(wo);
+      aux[kAuxCurvature] = curvature[hit.triangle];
+    }
+    if (n_g.dot(wo) <= 0) return true;  // back face of an open mesh: black
+    if (cos_i <= 0 || n_g.dot(wi) <= 0) return true;
+    if (options.cast_shadows &&
+        scene.Occluded(p + offset * n_g, wi, 0, point_light ? dist - offset : kInfinity)) {
+      if (aux) aux[kAuxCastShadow] = 1;
+      return true;
+    }
+    const auto& cuv = mesh.corner_uvs[hit.triangle];
+    const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
+    const int texel = TexelOfHit(atlas, uv);
+    if (texel < 0) return true;
+    // The texel's tangent frame, re-orthogonalised against the normal at the hit.
+    Vec3f t = atlas.tangent[texel] - n_s * n_s.dot(atlas.tangent[texel]);
+    if (t.squaredNorm() < 1e-12f) t = n_s.unitOrthogonal();  // tangent ∥ normal: any
+    t.normalize();
+    const Vec3f b = n_s.cross(t);
+    const Vec3f wi_local(t.dot(wi), b.dot(wi), cos_i);
+    const Vec3f wo_local(t.dot(wo), b.dot(wo), n_s.dot(wo));
+    if (wo_local.z() <= 0) return true;  // shading normal turned away from the viewer
+    const Vec3f f = brdf::EvalRgb(shaded.maps->texels[texel], wi_local, wo_local);
+    *radiance = f.cwiseProduct(irradiance_per_cos) * cos_i;
+    return true;
+  };
 
   RenderResult result{Image(camera.width, camera.height, 3, 0.0f),
-                      Image(camera.width, camera.height, 1, 0.0f)};
+                      Image(camera.width, camera.height, 1, 0.0f), Image()};
+  if (options.aux_buffers) result.aux = Image(camera.width, camera.height, kAuxChannelCount, 0.0f);
   ParallelFor(0, camera.height, 4, [&](int64_t y0, int64_t y1, int) {
     for (int64_t y = y0; y < y1; ++y) {
       for (int x = 0; x < camera.width; ++x) {
-        Vec3f origin, dir;
-        rays.Ray(x, double(y), &origin, &dir);
-        if (scene.Intersect(origin, dir, 0, kInfinity).hit) result.mask.at(x, int(y)) = 1;
-        Vec3f sum = Vec3f::Zero();
-        for (int sy = 0; sy < n; ++sy) {
-          for (int sx = 0; sx < n; ++sx) {
-            // Stratum centres: offsets (i + 0.5)/n - 0.5 within the pixel; n = 1 is the centre.
-            rays.Ray(x + (sx + 0.5) / n - 0.5, double(y) + (sy + 0.5) / n - 0.5, &origin, &dir);
-            const RayHit hit = scene.Intersect(origin, dir, 0, kInfinity);
-            if (!hit.hit) continue;
-            const auto& tri = mesh.triangles[hit.triangle];
-            const float b0 = 1 - hit.b1 - hit.b2;
-            const Vec3f p = b0 * mesh.positions[tri[0]] + hit.b1 * mesh.positions[tri[1]] +
-                            hit.b2 * mesh.positions[tri[2]];
-            const Vec3f n_g = mesh.GeometricNormal(hit.triangle);
-            const auto& cn = mesh.corner_normals[hit.triangle];
-            const Vec3f n_s = (b0 * cn[0] + hit.b1 * cn[1] + hit.b2 * cn[2]).normalized();
-            const Vec3f wo = -dir;
-            if (n_g.dot(wo) <= 0) continue;  // back face of an open mesh: black
-            Vec3f wi;
-            float dist = kInfinity;
-            Vec3f irradiance_per_cos = intensity;
-            if (point_light) {
-              const Vec3f to_light = light_in_object - p;
-              dist = to_light.norm();
-              wi = to_light / dist;
-              irradiance_per_cos /= dist * dist;
-            } else {
-              wi = light_dir_in_object;
+        float* aux = options.aux_buffers ? result.aux.pixel(x, int(y)) : nullptr;
+        Vec3f sum = Vec3f::Zero(), radiance;
+        if (n == 1) {
+          // The one sample is the centre ray: it gives the mask and the aux buffers too.
+          if (shade(x, double(y), &radiance, aux)) result.mask.at(x, int(y)) = 1;
+          sum = radiance;
+        } else {
+          if (aux) {
+            if (shade(x, double(y), &radiance, aux)) result.mask.at(x, int(y)) = 1;
+          } else {
+            Vec3f origin, dir;
+            rays.Ray(x, double(y), &origin, &dir);
+            if (scene.Intersect(origin, dir, 0, kInfinity).hit) result.mask.at(x, int(y)) = 1;
+          }
+          for (int sy = 0; sy < n; ++sy) {
+            for (int sx = 0; sx < n; ++sx) {
+              // Stratum centres: offsets (i + 0.5)/n - 0.5 within the pixel.
+              shade(x + (sx + 0.5) / n - 0.5, double(y) + (sy + 0.5) / n - 0.5, &radiance,
+                    nullptr);
+              sum += radiance;
             }
-            const float cos_i = n_s.dot(wi);
-            if (cos_i <= 0 || n_g.dot(wi) <= 0) continue;
-            if (options.cast_shadows &&
-                scene.Occluded(p + offset * n_g, wi, 0, point_light ? dist - offset : kInfinity)) {
-              continue;
-            }
-            const auto& cuv = mesh.corner_uvs[hit.triangle];
-            const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
-            const int texel = TexelOfHit(atlas, uv);
-            if (texel < 0) continue;
-            // The texel's tangent frame, re-orthogonalised against the normal at the hit.
-            Vec3f t = atlas.tangent[texel] - n_s * n_s.dot(atlas.tangent[texel]);
-            if (t.squaredNorm() < 1e-12f) t = n_s.unitOrthogonal();  // tangent ∥ normal: any
-            t.normalize();
-            const Vec3f b = n_s.cross(t);
-            const Vec3f wi_local(t.dot(wi), b.dot(wi), cos_i);
-            const Vec3f wo_local(t.dot(wo), b.dot(wo), n_s.dot(wo));
-            if (wo_local.z() <= 0) continue;  // shading normal turned away from the viewer
-            const Vec3f f = brdf::EvalRgb(shaded.maps->texels[texel], wi_local, wo_local);
-            sum += f.cwiseProduct(irradiance_per_cos) * cos_i;
           }
         }
         float* px = result.pixels.pixel(x, int(y));
         for (int c = 0; c < 3; ++c) px[c] = sum[c] * sample_weight;
       }
+    }
+  });
+  return result;
+}
+
+const std::vector<std::string>& AuxChannelNames() {
+  static const std::vector<std::string> names = {"cast_shadow", "cos_theta_i", "cos_theta_o",
+                                                 "curvature", "mask"};
+  return names;
+}
+
+std::vector<float> SurfaceCurvature(const TriangleMesh& mesh) {
+  // Object size S: area-weighted RMS distance of triangle centroids from the surface centroid.
+  double area_sum = 0;
+  Vec3d centroid = Vec3d::Zero();
+  std::vector<double> areas(mesh.TriangleCount());
+  std::vector<Vec3d> centres(mesh.TriangleCount());
+  for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
+    const auto& tri = mesh.triangles[t];
+    const Vec3d a = mesh.positions[tri[0]].cast<double>(), b = mesh.positions[tri[1]].cast<double>(),
+                c = mesh.positions[tri[2]].cast<double>();
+    areas[t] = 0.5 * (b - a).cross(c - a).norm();
+    centres[t] = (a + b + c) / 3;
+    area_sum += areas[t];
+    centroid += areas[t] * centres[t];
+  }
+  std::vector<float> curvature(mesh.TriangleCount(), 0.0f);
+  if (!(area_sum > 0)) return curvature;
+  centroid /= area_sum;
+  double spread = 0;
+  for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
+    spread += areas[t] * (centres[t] - centroid).squaredNorm();
+  }
+  const double size = std::sqrt(spread / area_sum);
+  for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
+    const auto& tri = mesh.triangles[t];
+    const auto& cn = mesh.corner_normals[t];
+    double worst = 0;
+    for (int i = 0; i < 3; ++i) {
+      const int j = (i + 1) % 3;
+      const double length = (mesh.positions[tri[i]] - mesh.positions[tri[j]]).cast<double>().norm();
+      if (!(length > 0)) continue;
+      const Vec3d a = cn[i].cast<double>(), b = cn[j].cast<double>();
+      // atan2 of |a x b| and a . b: accurate for small angles, where acos(a . b) is not.
+      const double angle = std::atan2(a.cross(b).norm(), a.dot(b));
+      worst = std::max(worst, angle / length);
+    }
+    curvature[t] = float(worst * size);
+  }
+  return curvature;
+}
+
+std::vector<float> NormalMapCurvature(const TexelAtlas& atlas, const Camera& camera) {
+  std::vector<float> curvature(atlas.TexelCount(), 0.0f);
+  if (atlas.TexelCount() == 0) return curvature;
+  // Image axes x (right), y (down) and the viewing axis z in the world frame (OpenCV rows).
+  const Mat3d& r = camera.cam_from_world.rotation;
+  const Vec3f axes[3] = {r.row(0).transpose().cast<float>(), r.row(1).transpose().cast<float>(),
+                         r.row(2).transpose().cast<float>()};
+  const double size = std::sqrt(double(atlas.TexelCount()) / kPi);
+  auto texel_at = [&](int px, int py) {
+    if (px < 0 || py < 0 || px >= atlas.width || py >= atlas.height) return -1;
+    return atlas.TexelAt(px, py);
+  };
+  ParallelFor(0, int64_t(atlas.TexelCount()), 4096, [&](int64_t t0, int64_t t1, int) {
+    for (int64_t t = t0; t < t1; ++t) {
+      int x, y;
+      atlas.PixelOf(size_t(t), &x, &y);
+      const Vec3f& n = atlas.shading_normal[size_t(t)];
+      const double nz = std::max(double(std::abs(n.dot(axes[2]))), kMinNormalMapCos);
+      double worst = 0;
+      for (int dim = 0; dim < 2; ++dim) {
+        const int dx = dim == 0 ? 1 : 0, dy = 1 - dx;
+        int a = texel_at(x - dx, y - dy), b = texel_at(x + dx, y + dy);
+        double steps = 2;  // central difference over 2 px, one-sided (1 px) at the border
+        if (a < 0 && b < 0) continue;
+        if (a < 0 || b < 0) {
+          steps = 1;
+          if (a < 0) a = int(t);
+          if (b < 0) b = int(t);
+        }
+        // Arc length per pixel step of the height field z(x, y): sqrt(1 + (dz/dx)²), with
+        // dz/dx = -n_x / n_z along this image axis.
+        const double slope = double(n.dot(axes[dim])) / nz;
+        const double stretch = std::sqrt(1 + slope * slope);
+        const Vec3d na = atlas.shading_normal[size_t(a)].cast<double>();
+        const Vec3d nb = atlas.shading_normal[size_t(b)].cast<double>();
+        const double angle = std::atan2(na.cross(nb).norm(), na.dot(nb));
+        worst = std::max(worst, angle / (steps * stretch));
+      }
+      curvature[size_t(t)] = float(worst * size);
+    }
+  });
+  return curvature;
+}
+
+StatusOr<RenderResult> RenderNormalMapImage(const TexelAtlas& atlas, const BrdfMaps& maps,
+                                            const Camera& camera, const Light& light,
+                                            double exposure_s, const RenderOptions& options) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_CHECK(maps.texels.size() == atlas.TexelCount());
+  if (atlas.width != camera.width || atlas.height != camera.height) {
+    return InvalidArgumentError("camera \"", camera.id, "\" is ", camera.width, "x", camera.height,
+                                " but the normal map is ", atlas.width, "x", atlas.height);
+  }
+  if (light.type != LightType::kDirectional) {
+    return InvalidArgumentError("light \"", light.id,
+                                "\": normal-map captures are rendered with directional lights "
+                                "only (the surface positions are unknown)");
+  }
+  const Rigid3 world_from_cam = camera.cam_from_world.Inverse();
+  const Vec3f wi = light.direction.normalized().cast<float>();
+  const Vec3f intensity = light.intensity.cast<float>();
+  const Vec3d axis = camera.AxisInWorld();
+  std::vector<float> curvature;
+  if (options.aux_buffers) curvature = NormalMapCurvature(atlas, camera);
+  RenderResult result{Image(camera.width, camera.height, 3, 0.0f),
+                      Image(camera.width, camera.height, 1, 0.0f), Image()};
+  if (options.aux_buffers) result.aux = Image(camera.width, camera.height, kAuxChannelCount, 0.0f);
+  ParallelFor(0, int64_t(atlas.TexelCount()), 4096, [&](int64_t t0, int64_t t1, int) {
+    for (int64_t t = t0; t < t1; ++t) {
+      int x, y;
+      atlas.PixelOf(size_t(t), &x, &y);
+      Vec3f wo = -axis.cast<float>();
+      if (camera.model == CameraModel::kPinhole) {
+        Vec3d o, d;
+        camera.PixelRay({double(x), double(y)}, &o, &d);
+        wo = -(world_from_cam.rotation * d).normalized().cast<float>();
+      }
+      const Vec3f& n = atlas.shading_normal[size_t(t)];
+      const Vec3f& tangent = atlas.tangent[size_t(t)];
+      const Vec3f& bitangent = atlas.bitangent[size_t(t)];
+      const float cos_i = n.dot(wi), cos_o = n.dot(wo);
+      result.mask.at(x, y) = 1;
+      if (options.aux_buffers) {
+        float* aux = result.aux.pixel(x, y);
+        aux[kAuxMask] = 1;
+        aux[kAuxCosThetaI] = cos_i;
+        aux[kAuxCosThetaO] = cos_o;
+        aux[kAuxCurvature] = curvature[size_t(t)];
+      }
+      if (cos_i <= 0 || cos_o <= 0) continue;
+      const Vec3f wi_local(tangent.dot(wi), bitangent.dot(wi), cos_i);
+      const Vec3f wo_local(tangent.dot(wo), bitangent.dot(wo), cos_o);
+      const Vec3f f = brdf::EvalRgb(maps.texels[size_t(t)], wi_local, wo_local);
+      const Vec3f value = f.cwiseProduct(intensity) * (cos_i * float(exposure_s));
+      float* px = result.pixels.pixel(x, y);
+      for (int c = 0; c < 3; ++c) px[c] = value[c];
     }
   });
   return result;

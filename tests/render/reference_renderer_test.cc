@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 #include "engine/brdf/lafortune.h"
 #include "tests/support/shapes.h"
@@ -229,6 +231,205 @@ TEST(ReferenceRenderer, TurntablePoseMovesTheObject) {
     for (int x = 0; x < 64; ++x) mismatches += at0->at(x, y) != at180->at(63 - x, 63 - y);
   }
   EXPECT_EQ(mismatches, 0);
+}
+
+// ---- Validation buffers -------------------------------------------------------------------
+
+// cos θ of the aux buffers are computed in float from float normals and directions: ~1e-7; the
+// sphere and plane normals here are exact at the vertices, so 1e-5 leaves ample room.
+constexpr double kAuxCosTolerance = 1e-5;
+// Scale-free curvature of a finely tessellated sphere: 1 up to the chord/arc difference and the
+// triangle-shape spread of angle / edge length (< 2 % on a 180 x 90 sphere away from the poles).
+constexpr double kSphereCurvatureTolerance = 0.05;
+
+// The plane + square occluder scene of KnownOccluderCastsExactlyTheExpectedShadow.
+LambertScene MakeOccluderScene() {
+  TriangleMesh mesh = testing::MakeGridPlane(2, 2, 1, 1, 0);
+  TriangleMesh occluder = testing::MakeGridPlane(0.4f, 0.4f, 1, 1, 0.3f);
+  for (auto& uv : occluder.corner_uvs) {
+    for (auto& c : uv) c = Vec2f(0.75f, 0.75f) + 0.2f * c;
+  }
+  for (auto& uv : mesh.corner_uvs) {
+    for (auto& c : uv) c *= 0.5f;
+  }
+  testing::AppendMesh(occluder, &mesh);
+  return MakeLambertScene(std::move(mesh), Vec3f(0.5f, 0.5f, 0.5f), 64);
+}
+
+TEST(ReferenceRenderer, AuxBuffersLeaveThePixelsUnchanged) {
+  LambertScene s = MakeOccluderScene();
+  const Camera cam = LookAtCamera({0.1, -1.2, 2.2}, {0, 0, 0}, 64, 64, 48);
+  Light light;
+  light.position = {0.2, 0.1, 1.0};
+  for (int n : {1, 2}) {
+    RenderOptions plain;
+    plain.supersampling = n;
+    RenderOptions with_aux = plain;
+    with_aux.aux_buffers = true;
+    auto a = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, plain);
+    auto b = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, with_aux);
+    ASSERT_TRUE(a.ok() && b.ok());
+    EXPECT_TRUE(a->aux.empty());
+    ASSERT_EQ(b->aux.channels, kAuxChannelCount);
+    EXPECT_EQ(a->pixels.data, b->pixels.data) << "supersampling " << n;  // bit for bit
+    EXPECT_EQ(a->mask.data, b->mask.data);
+    for (size_t p = 0; p < b->mask.PixelCount(); ++p) {
+      ASSERT_EQ(b->aux.data[p * kAuxChannelCount + kAuxMask], b->mask.data[p]);
+    }
+  }
+  EXPECT_EQ(AuxChannelNames().size(), size_t(kAuxChannelCount));
+  EXPECT_TRUE(std::is_sorted(AuxChannelNames().begin(), AuxChannelNames().end()))
+      << "EXR stores channels sorted by name; AuxChannel follows that order";
+}
+
+TEST(ReferenceRenderer, AuxBuffersMarkCastShadowsAndCosines) {
+  LambertScene s = MakeOccluderScene();
+  const Camera cam = LookAtCamera({0.1, -1.2, 2.2}, {0, 0, 0}, 120, 120, 90);
+  Light light;
+  light.position = {0.2, 0.1, 1.0};
+  RenderOptions options;
+  options.aux_buffers = true;
+  auto r = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, options);
+  ASSERT_TRUE(r.ok());
+  int shadowed = 0, lit = 0;
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      Vec3d o, d;
+      WorldRay(cam, x, y, &o, &d);
+      const float* aux = r->aux.pixel(x, y);
+      const Vec3d on_occluder = o + ((0.3 - o.z()) / d.z()) * d;
+      if (std::abs(on_occluder.x()) < 0.2 + kShadowEdgeBand &&
+          std::abs(on_occluder.y()) < 0.2 + kShadowEdgeBand) {
+        continue;  // the pixel sees the occluder (or its edge)
+      }
+      const Vec3d q = o + (-o.z() / d.z()) * d;
+      if (std::abs(q.x()) >= 1 || std::abs(q.y()) >= 1) {
+        EXPECT_EQ(aux[kAuxMask], 0.0f);
+        EXPECT_EQ(aux[kAuxCastShadow], 0.0f);
+        continue;
+      }
+      const Vec3d to_light = light.position - q;
+      EXPECT_NEAR(aux[kAuxCosThetaI], to_light.z() / to_light.norm(), kAuxCosTolerance);
+      EXPECT_NEAR(aux[kAuxCosThetaO], -d.z() / d.norm(), kAuxCosTolerance);
+      EXPECT_EQ(aux[kAuxCurvature], 0.0f) << "a plane has no curvature";
+      const Vec3d crossing = q + ((0.3 - q.z()) / (light.position.z() - q.z())) * to_light;
+      const double margin = std::min(0.2 - std::abs(crossing.x()), 0.2 - std::abs(crossing.y()));
+      if (std::abs(margin) < kShadowEdgeBand) continue;
+      EXPECT_EQ(aux[kAuxCastShadow], margin > 0 ? 1.0f : 0.0f) << x << "," << y;
+      (margin > 0 ? shadowed : lit)++;
+    }
+  }
+  EXPECT_GT(shadowed, 150);
+  EXPECT_GT(lit, 3000);
+}
+
+TEST(SurfaceCurvature, IsOneOnASphereAtAnyScaleAndZeroOnAPlane) {
+  for (float radius : {0.05f, 5.0f}) {
+    const std::vector<float> k = SurfaceCurvature(testing::MakeUvSphere(radius, 180, 90));
+    std::vector<float> sorted = k;
+    std::sort(sorted.begin(), sorted.end());
+    const float median = sorted[sorted.size() / 2];
+    EXPECT_NEAR(median, 1.0, kSphereCurvatureTolerance) << "radius " << radius;
+    EXPECT_NEAR(sorted[sorted.size() / 20], 1.0, 2 * kSphereCurvatureTolerance);  // 5th percentile
+  }
+  for (float v : SurfaceCurvature(testing::MakeGridPlane(2, 1, 8, 4))) EXPECT_EQ(v, 0.0f);
+}
+
+// ---- Normal-map captures --------------------------------------------------------------------
+
+// An orthographic camera looking down -z of a y-up, z-towards-the-viewer world (the DiLiGenT frame
+// of acquire/diligent): cam_from_world = [diag(1, -1, -1) | (0, 0, 1)].
+Camera FrontOrthographicCamera(int size) {
+  Camera cam;
+  cam.id = "cam0";
+  cam.model = CameraModel::kOrthographic;
+  cam.width = cam.height = size;
+  cam.pixel_size_m = 1e-3;
+  cam.cam_from_world.rotation = Vec3d(1, -1, -1).asDiagonal();
+  cam.cam_from_world.translation = Vec3d(0, 0, 1);
+  return cam;
+}
+
+// Normal map of a sphere of radius r px centred in a size x size image (y up in the world: row 0
+// at the top has n_y > 0), and its mask.
+void SphereNormalMap(int size, double r, Image* normals, Image* mask) {
+  *normals = Image(size, size, 3, 0.0f);
+  *mask = Image(size, size, 1, 0.0f);
+  const double c = 0.5 * (size - 1);
+  for (int y = 0; y < size; ++y) {
+    for (int x = 0; x < size; ++x) {
+      const double nx = (x - c) / r, ny = -(y - c) / r, rr = nx * nx + ny * ny;
+      if (rr >= 1) continue;
+      mask->at(x, y) = 1;
+      normals->at(x, y, 0) = float(nx);
+      normals->at(x, y, 1) = float(ny);
+      normals->at(x, y, 2) = float(std::sqrt(1 - rr));
+    }
+  }
+}
+
+TEST(NormalMapRenderer, LambertianSphereMatchesClosedFormWithItsAuxBuffers) {
+  const int size = 65;
+  Image normals, mask;
+  SphereNormalMap(size, 30, &normals, &mask);
+  auto atlas = BuildNormalMapAtlas(normals, mask);
+  ASSERT_TRUE(atlas.ok()) << atlas.status().ToString();
+  BrdfMaps maps;
+  brdf::BrdfParams p;
+  p.rho_d = {0.8f, 0.5f, 0.3f};
+  maps.texels.assign(atlas->TexelCount(), p);
+  const Camera cam = FrontOrthographicCamera(size);
+  Light light;
+  light.type = LightType::kDirectional;
+  light.direction = Vec3d(0.3, 0.5, 0.8).normalized();
+  light.intensity = {2, 3, 4};
+  RenderOptions options;
+  options.aux_buffers = true;
+  auto r = RenderNormalMapImage(*atlas, maps, cam, light, 0.5, options);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  std::vector<float> curvature;
+  for (int y = 0; y < size; ++y) {
+    for (int x = 0; x < size; ++x) {
+      const float* aux = r->aux.pixel(x, y);
+      ASSERT_EQ(r->mask.at(x, y), mask.at(x, y));
+      if (mask.at(x, y) == 0) {
+        EXPECT_EQ(r->pixels.at(x, y, 0), 0.0f);
+        continue;
+      }
+      const Vec3d n = Vec3d(normals.at(x, y, 0), normals.at(x, y, 1), normals.at(x, y, 2)).normalized();
+      const double cos_i = n.dot(light.direction);
+      EXPECT_NEAR(aux[kAuxCosThetaI], cos_i, kAuxCosTolerance);
+      EXPECT_NEAR(aux[kAuxCosThetaO], n.z(), kAuxCosTolerance) << "view direction is +z";
+      EXPECT_EQ(aux[kAuxCastShadow], 0.0f) << "normal maps cast no shadows";
+      for (int c = 0; c < 3; ++c) {
+        const double expected = 0.5 * p.rho_d[c] / kPi * light.intensity[c] * std::max(0.0, cos_i);
+        ASSERT_NEAR(r->pixels.at(x, y, c), expected, 1e-6 * (1 + expected)) << x << "," << y;
+      }
+      if (n.z() > 0.5) curvature.push_back(aux[kAuxCurvature]);
+    }
+  }
+  // The centre pixel faces the camera: cos θo = 1.
+  EXPECT_NEAR(r->aux.pixel(32, 32)[kAuxCosThetaO], 1.0, 1e-6);
+  // Upper rows face +y, where the light is: brighter than the lower rows.
+  EXPECT_GT(r->pixels.at(32, 10, 0), r->pixels.at(32, 54, 0));
+  std::sort(curvature.begin(), curvature.end());
+  EXPECT_NEAR(curvature[curvature.size() / 2], 1.0, 0.1) << "sphere: curvature x size ~ 1";
+}
+
+TEST(NormalMapRenderer, RejectsPointLightsAndMismatchedCameras) {
+  Image normals, mask;
+  SphereNormalMap(16, 6, &normals, &mask);
+  auto atlas = BuildNormalMapAtlas(normals, mask);
+  ASSERT_TRUE(atlas.ok());
+  BrdfMaps maps;
+  maps.texels.resize(atlas->TexelCount());
+  Light point;
+  EXPECT_EQ(RenderNormalMapImage(*atlas, maps, FrontOrthographicCamera(16), point, 1, {})
+                .status().code(), StatusCode::kInvalidArgument);
+  Light directional;
+  directional.type = LightType::kDirectional;
+  EXPECT_EQ(RenderNormalMapImage(*atlas, maps, FrontOrthographicCamera(17), directional, 1, {})
+                .status().code(), StatusCode::kInvalidArgument);
 }
 
 }  // namespace

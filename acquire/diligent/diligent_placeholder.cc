@@ -1,1 +1,0 @@
-// Placeholder until the DiLiGenT importer lands.

@@ -1,0 +1,36 @@
+#pragma once
+// The SPIR-V of every shader in shaders/, compiled by glslc at build time and embedded in the
+// binary (no files are read at run time).
+//
+// Adding a shader: a reflcap_add_shader(NAME my_kernel SRC dir/my_kernel.comp) line in
+// shaders/CMakeLists.txt and the entry kMyKernel below (NAME in PascalCase with a k). The table
+// behind ShaderBlob is generated from the CMake lines; a missing or extra enum entry fails to
+// compile (shader_blobs.cc), so the two cannot drift apart.
+#include <cstddef>
+#include <cstdint>
+
+namespace reflcap::gpu {
+
+enum class ShaderId {
+  kBrdfProbe,           // shaders/probe/brdf_probe.comp: the safe_math/Lafortune twins probe
+  kLoopProbe,           // shaders/probe/loop_probe.comp: loop-iteration counting
+  kChunkProbe,          // shaders/probe/chunk_probe.comp: in-place transform of a bound chunk
+  kBenchEmpty,          // shaders/bench/empty.comp: empty kernel (dispatch overhead)
+  kBenchMadThroughput,  // shaders/bench/mad_throughput.comp: float multiply-add throughput
+  kCount                // number of shaders; keep last
+};
+
+// A SPIR-V module: `size` 32-bit words at `data` (static storage, never null).
+struct Span {
+  const uint32_t* data = nullptr;
+  size_t size = 0;
+  size_t size_bytes() const { return size * sizeof(uint32_t); }
+};
+
+// The SPIR-V of `id` (id < kCount).
+Span ShaderBlob(ShaderId id);
+// The reflcap_add_shader NAME of `id`, e.g. "brdf_probe"; its source path under shaders/.
+const char* ShaderName(ShaderId id);
+const char* ShaderSource(ShaderId id);
+
+}  // namespace reflcap::gpu

@@ -1,0 +1,167 @@
+#include "engine/gpu/vk_buffer.h"
+
+#include <algorithm>
+#include <cstring>
+#include <utility>
+
+#include "engine/gpu/vk_commands.h"
+#include "engine/gpu/vk_status.h"
+
+namespace reflcap::gpu {
+namespace {
+
+std::string Bytes(uint64_t n) {
+  if (n >= (uint64_t{1} << 30)) return StrCat(n / double(uint64_t{1} << 30), " GiB (", n, " B)");
+  if (n >= (uint64_t{1} << 20)) return StrCat(n / double(uint64_t{1} << 20), " MiB (", n, " B)");
+  return StrCat(n, " B");
+}
+
+Status CheckRange(const Buffer& buffer, uint64_t offset, uint64_t size, const char* what) {
+  if (buffer.handle() == VK_NULL_HANDLE) return InvalidArgumentError(what, ": empty Buffer");
+  if (offset > buffer.size() || size > buffer.size() - offset) {
+    return InvalidArgumentError(what, ": bytes [", offset, ", ", offset + size,
+                                ") exceed the buffer's ", buffer.size());
+  }
+  return OkStatus();
+}
+
+}  // namespace
+
+StatusOr<Buffer> Buffer::Create(VkContext& ctx, uint64_t size_bytes, MemoryKind kind) {
+  if (size_bytes == 0) return InvalidArgumentError("Buffer::Create: size is 0");
+  const uint64_t cap = ctx.max_allocation_bytes();
+  if (size_bytes > cap) {
+    return UnavailableError(
+        "a ", Bytes(size_bytes), " buffer exceeds the single-allocation cap of ", Bytes(cap),
+        " on ", ctx.info().name, " (min of reflcap's 1 GiB, maxMemoryAllocationSize ",
+        Bytes(ctx.info().max_memory_allocation_size), " and the device-local heap ",
+        Bytes(ctx.info().device_local_heap_size), "); process the data in chunks");
+  }
+
+  Buffer b;
+  b.device_ = ctx.device();
+  b.size_ = size_bytes;
+  b.kind_ = kind;
+  VkBufferCreateInfo info{};
+  info.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
+  info.size = size_bytes;
+  info.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+               VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+  info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  VK_RETURN_IF_ERROR(vkCreateBuffer(b.device_, &info, nullptr, &b.buffer_));
+
+  VkMemoryRequirements req{};
+  vkGetBufferMemoryRequirements(b.device_, b.buffer_, &req);
+  constexpr VkMemoryPropertyFlags kHostCoherent =
+      VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+  StatusOr<uint32_t> type =
+      kind == MemoryKind::kDevice
+          ? ctx.FindMemoryType(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT)
+          : ctx.FindMemoryType(req.memoryTypeBits, kHostCoherent,
+                               VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+  if (!type.ok() && kind == MemoryKind::kDevice) {
+    // Some devices (software or exotic) expose no DEVICE_LOCAL type for buffers; any type works.
+    type = ctx.FindMemoryType(req.memoryTypeBits, 0);
+  }
+  if (!type.ok()) return type.status();
+
+  VkMemoryAllocateInfo alloc{};
+
+  alloc.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+  alloc.allocationSize = req.size;
+  alloc.memoryTypeIndex = *type;
+  VK_RETURN_IF_ERROR(vkAllocateMemory(b.device_, &alloc, nullptr, &b.memory_));
+  VK_RETURN_IF_ERROR(vkBindBufferMemory(b.device_, b.buffer_, b.memory_, 0));
+  if ((ctx.MemoryTypeFlags(*type) & kHostCoherent) == kHostCoherent) {
+    VK_RETURN_IF_ERROR(vkMapMemory(b.device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_));
+  }
+  return b;
+}
+
+Buffer::~Buffer() { Release(); }
+
+Buffer::Buffer(Buffer&& other) noexcept { *this = std::move(other); }
+
+Buffer& Buffer::operator=(Buffer&& other) noexcept {
+  if (this != &other) {
+    Release();
+    device_ = std::exchange(other.device_, VK_NULL_HANDLE);
+    buffer_ = std::exchange(other.buffer_, VK_NULL_HANDLE);
+    memory_ = std::exchange(other.memory_, VK_NULL_HANDLE);
+    size_ = std::exchange(other.size_, 0);
+    kind_ = other.kind_;
+    mapped_ = std::exchange(other.mapped_, nullptr);
+  }
+  return *this;
+}
+
+void Buffer::Release() {
+  if (device_ == VK_NULL_HANDLE) return;
+  if (buffer_ != VK_NULL_HANDLE) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (memory_ != VK_NULL_HANDLE) vkFreeMemory(device_, memory_, nullptr);  // also unmaps
+  device_ = VK_NULL_HANDLE;
+  buffer_ = VK_NULL_HANDLE;
+  memory_ = VK_NULL_HANDLE;
+  mapped_ = nullptr;
+  size_ = 0;
+}
+
+Status Upload(VkContext& ctx, const void* src, uint64_t size, Buffer& dst, uint64_t dst_offset) {
+  REFLCAP_RETURN_IF_ERROR(CheckRange(dst, dst_offset, size, "Upload"));
+  if (size == 0) return OkStatus();
+  if (!dst.host_visible()) {
+    return UploadStaged(ctx, src, size, dst, dst_offset, kStagingChunkBytes);
+  }
+  std::memcpy(static_cast<char*>(dst.mapped()) + dst_offset, src, size);
+  return OkStatus();
+}
+
+Status Download(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size, void* dst) {
+  REFLCAP_RETURN_IF_ERROR(CheckRange(src, src_offset, size, "Download"));
+  if (size == 0) return OkStatus();
+  if (!src.host_visible()) {
+    return DownloadStaged(ctx, src, src_offset, size, dst, kStagingChunkBytes);
+  }
+  std::memcpy(dst, static_cast<const char*>(src.mapped()) + src_offset, size);
+  return OkStatus();
+}
+
+Status UploadStaged(VkContext& ctx, const void* src, uint64_t size, Buffer& dst,
+                    uint64_t dst_offset, uint64_t staging_bytes) {
+  REFLCAP_RETURN_IF_ERROR(CheckRange(dst, dst_offset, size, "UploadStaged"));
+  if (staging_bytes == 0) return InvalidArgumentError("UploadStaged: staging_bytes is 0");
+  if (size == 0) return OkStatus();
+  const uint64_t piece = std::min(size, staging_bytes);
+  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece));
+  REFLCAP_ASSIGN_OR_RETURN(CommandBuffer cmd, CommandBuffer::Create(ctx));
+  for (uint64_t done = 0; done < size;) {
+    const uint64_t n = std::min(size - done, piece);
+    std::memcpy(staging->mapped(), static_cast<const char*>(src) + done, n);
+    REFLCAP_RETURN_IF_ERROR(cmd.Begin());
+    REFLCAP_RETURN_IF_ERROR(cmd.CopyBuffer(*staging, 0, dst, dst_offset + done, n));
+    REFLCAP_RETURN_IF_ERROR(cmd.SubmitAndWait());
+    done += n;
+  }
+  return OkStatus();
+}
+
+Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size,
+                      void* dst, uint64_t staging_bytes) {
+  REFLCAP_RETURN_IF_ERROR(CheckRange(src, src_offset, size, "DownloadStaged"));
+  if (staging_bytes == 0) return InvalidArgumentError("DownloadStaged: staging_bytes is 0");
+  if (size == 0) return OkStatus();
+  const uint64_t piece = std::min(size, staging_bytes);
+  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece));
+  REFLCAP_ASSIGN_OR_RETURN(CommandBuffer cmd, CommandBuffer::Create(ctx));
+  for (uint64_t done = 0; done < size;) {
+    const uint64_t n = std::min(size - done, piece);
+    REFLCAP_RETURN_IF_ERROR(cmd.Begin());
+    REFLCAP_RETURN_IF_ERROR(cmd.CopyBuffer(src, src_offset + done, *staging, 0, n));
+    REFLCAP_RETURN_IF_ERROR(cmd.SubmitAndWait());
+    std::memcpy(static_cast<char*>(dst) + done, staging->mapped(), n);
+    done += n;
+  }
+  return OkStatus();
+}
+
+}  // namespace reflcap::gpu

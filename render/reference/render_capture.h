@@ -1,0 +1,89 @@
+#pragma once
+// Re-rendering a capture's photographs from a fit: what `reflcap render` does (and `reflcap run`
+// will do), as a library so tests and later verbs call it directly.
+//
+// Input: a capture/1 and a parameter map FIT/params.exr (BrdfMaps channels, brdf_maps.h) in the
+// layout of the capture's atlas — BuildTexelAtlas(mesh, W, H) with W x H the size of params.exr for
+// mesh captures, BuildNormalMapAtlas(normals, mask) for normal-map captures (params.exr then has
+// the camera's size). A synthetic capture's gt/params.exr is such a map.
+//
+// Output folder (the caller stages it; see StagingDir), for each selected photograph with
+// relative file F (e.g. images/0003.exr) and key K = ImageKey(F) (e.g. 0003):
+//   F with extension .exr    the re-render: float RGB, exposure_s * radiance (as the photograph)
+//   masks/K.png              object mask at the pixel centre, 8-bit grey, 255 = object
+//   aux/K.exr                validation buffers, float, channels AuxChannelNames() (see
+//                            reference_renderer.h: cast_shadow, cos_theta_i, cos_theta_o,
+//                            curvature, mask)
+//   render_report.json       backend, device, capture, fit, split, options, atlas, per-image
+//                            files and seconds, timings
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/capture/capture.h"
+#include "engine/core/status.h"
+#include "engine/mesh/ray_scene.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/brdf_maps.h"
+#include "render/reference/reference_renderer.h"
+
+namespace reflcap::render {
+
+// Which photographs a command works on.
+enum class SplitSelection { kHoldout, kTrain, kAll };
+// "holdout", "train", "all"; anything else is InvalidArgument naming `option`.
+StatusOr<SplitSelection> ParseSplitSelection(const std::string& text, const std::string& option);
+const char* SplitSelectionName(SplitSelection selection);
+bool IsSelected(SplitSelection selection, Split split);
+
+// The name an image's derived files take: its relative file without extension, and without a
+// leading "images/" folder ("images/0003.exr" -> "0003", "raw/a.png" -> "raw/a").
+std::string ImageKey(const std::string& file);
+// Relative paths of the derived files of image file F inside a render folder.
+std::string RenderPathFor(const std::string& file);  // F with extension .exr
+std::string MaskPathFor(const std::string& file);    // masks/<key>.png
+std::string AuxPathFor(const std::string& file);     // aux/<key>.exr
+
+// A capture's geometry with a fit on it, ready to render.
+struct FittedCapture {
+  const Capture* capture = nullptr;
+  bool normal_map = false;
+  TriangleMesh mesh;                  // mesh captures
+  std::unique_ptr<RayScene> scene;    // mesh captures
+  TexelAtlas atlas;
+  BrdfMaps maps;
+};
+
+// Loads the geometry of `capture` and the parameter map `params_exr` in its atlas layout.
+// Errors name the file: NotFound (missing), InvalidArgument (a missing channel, a size that does
+// not match a normal-map capture's camera), DataLoss (corrupt).
+StatusOr<std::unique_ptr<FittedCapture>> LoadFittedCapture(const Capture& capture,
+                                                           const std::filesystem::path& params_exr);
+
+// Renders capture image `index` (mesh or normal map).
+StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t index,
+                                          const RenderOptions& options);
+
+struct CaptureRenderOptions {
+  SplitSelection split = SplitSelection::kHoldout;
+  int supersampling = 1;     // N x N samples per pixel, [1, kMaxSupersampling]; mesh captures
+  bool cast_shadows = true;  // mesh captures
+};
+
+struct CaptureRenderSummary {
+  size_t images = 0;
+  size_t texels = 0;
+  int num_lobes = 0;
+  double load_s = 0, render_s = 0, write_s = 0, total_s = 0;
+};
+
+// Renders every selected photograph of `capture` into `out_dir` (created if missing), with the
+// layout above. FailedPrecondition when no photograph is selected; errors of LoadFittedCapture
+// and of writing (Internal).
+StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture,
+                                             const std::filesystem::path& params_exr,
+                                             const std::filesystem::path& out_dir,
+                                             const CaptureRenderOptions& options);
+
+}  // namespace reflcap::render

@@ -1,0 +1,398 @@
+// Image metrics of `reflcap validate` (definitions in metrics.h).
+#include "render/validate/metrics.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/check.h"
+#include "render/reference/reference_renderer.h"
+
+namespace reflcap::validate {
+namespace {
+
+bool In(const Image& mask, int x, int y) { return mask.at(x, y, 0) > 0.5f; }
+
+// Offsets of the disc of radius r (Euclidean, centre included).
+std::vector<std::pair<int, int>> Disc(double radius_px) {
+  std::vector<std::pair<int, int>> offsets;
+  const int r = int(std::floor(radius_px));
+  for (int dy = -r; dy <= r; ++dy) {
+    for (int dx = -r; dx <= r; ++dx) {
+      if (dx * dx + dy * dy <= radius_px * radius_px) offsets.push_back({dx, dy});
+    }
+  }
+  return offsets;
+}
+
+// -10 log10(x), capped at kMaxPsnrDb (x = 0 gives the cap).
+double CappedDb(double mse_over_peak2) {
+  if (!(mse_over_peak2 > 0)) return kMaxPsnrDb;
+  return std::min(kMaxPsnrDb, -10 * std::log10(mse_over_peak2));
+}
+
+// Separable Gaussian blur (zero outside the image) of a width x height scalar field.
+std::vector<double> Blur(const std::vector<double>& in, int width, int height,
+                         const std::vector<double>& kernel) {
+  const int r = int(kernel.size() / 2);
+  std::vector<double> tmp(in.size(), 0.0), out(in.size(), 0.0);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      double s = 0;
+      for (int k = -r; k <= r; ++k) {
+        const int xx = x + k;
+        if (xx >= 0 && xx < width) s += kernel[k + r] * in[size_t(y) * width + xx];
+      }
+      tmp[size_t(y) * width + x] = s;
+    }
+  }
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      double s = 0;
+      for (int k = -r; k <= r; ++k) {
+        const int yy = y + k;
+        if (yy >= 0 && yy < height) s += kernel[k + r] * tmp[size_t(yy) * width + x];
+      }
+      out[size_t(y) * width + x] = s;
+    }
+  }
+  return out;
+}
+
+std::vector<double> GaussianKernel() {
+  std::vector<double> k(2 * kSsimRadius + 1);
+  double sum = 0;
+  for (int i = -kSsimRadius; i <= kSsimRadius; ++i) {
+    k[i + kSsimRadius] = std::exp(-0.5 * i * i / (kSsimSigma * kSsimSigma));
+    sum += k[i + kSsimRadius];
+  }
+  for (double& v : k) v /= sum;
+  return k;
+}
+
+}  // namespace
+
+const char* RegionName(int region) {
+  switch (region) {
+    case kShadowEdge: return "shadow_edge";
+    case kHighCurvatureRegion: return "high_curvature";
+    case kGrazing: return "grazing";
+    default: return "elsewhere";
+  }
+}
+
+Image BinaryMask(const Image& image) {
+  Image out(image.width, image.height, 1, 0.0f);
+  for (size_t i = 0; i < image.PixelCount(); ++i) {
+    out.data[i] = image.data[i * image.channels] > 0.5f ? 1.0f : 0.0f;
+  }
+  return out;
+}
+
+Image ErodeMask(const Image& mask, double radius_px) {
+  const auto disc = Disc(radius_px);
+  Image out(mask.width, mask.height, 1, 0.0f);
+  for (int y = 0; y < mask.height; ++y) {
+    for (int x = 0; x < mask.width; ++x) {
+      bool keep = In(mask, x, y);
+      for (size_t i = 0; keep && i < disc.size(); ++i) {
+        const int xx = x + disc[i].first, yy = y + disc[i].second;
+        keep = xx >= 0 && yy >= 0 && xx < mask.width && yy < mask.height && In(mask, xx, yy);
+      }
+      out.at(x, y) = keep ? 1.0f : 0.0f;
+    }
+  }
+  return out;
+}
+
+Image DilateMask(const Image& mask, double radius_px) {
+  const auto disc = Disc(radius_px);
+  Image out(mask.width, mask.height, 1, 0.0f);
+  for (int y = 0; y < mask.height; ++y) {
+    for (int x = 0; x < mask.width; ++x) {
+      if (!In(mask, x, y)) continue;
+      for (const auto& [dx, dy] : disc) {
+        const int xx = x + dx, yy = y + dy;
+        if (xx >= 0 && yy >= 0 && xx < mask.width && yy < mask.height) out.at(xx, yy) = 1;
+      }
+    }
+  }
+  return out;
+}
+
+double NoiseModel::Variance(double v) const {
+  return photon_sigma_at_1 * photon_sigma_at_1 * std::max(v, 0.0) + read_sigma * read_sigma;
+}
+
+std::optional<NoiseModel> NoiseModelFromGroundTruth(const std::string& ground_truth_json) {
+  if (ground_truth_json.empty()) return std::nullopt;
+  const nlohmann::json truth = nlohmann::json::parse(ground_truth_json, nullptr, false);
+  if (truth.is_discarded() || !truth.is_object()) return std::nullopt;
+  auto it = truth.find("noise");
+  if (it == truth.end() || !it->is_object()) return std::nullopt;
+  auto photon = it->find("photon_sigma_at_1");
+  auto read = it->find("read_sigma");
+  if (photon == it->end() || read == it->end() || !photon->is_number() || !read->is_number()) {
+    return std::nullopt;
+  }
+  NoiseModel model{photon->get<double>(), read->get<double>()};
+  if (!(model.photon_sigma_at_1 >= 0) || !(model.read_sigma >= 0)) return std::nullopt;
+  return model;
+}
+
+void ErrorSums::Add(const ErrorSums& o) {
+  pixels += o.pixels;
+  values += o.values;
+  sse += o.sse;
+  sse_over_peak2 += o.sse_over_peak2;
+  photo_sq += o.photo_sq;
+  noise_var_over_peak2 += o.noise_var_over_peak2;
+  ssim_sum += o.ssim_sum;
+}
+
+std::optional<double> ErrorSums::PsnrDb() const {
+  if (!(values > 0)) return std::nullopt;
+  return CappedDb(sse_over_peak2 / values);
+}
+
+std::optional<double> ErrorSums::RelRmse() const {
+  if (!(values > 0)) return std::nullopt;
+  if (sse == 0) return 0.0;
+  if (!(photo_sq > 0)) return std::nullopt;
+  return std::sqrt(sse / photo_sq);
+}
+
+std::optional<double> ErrorSums::Ssim() const {
+  if (!(pixels > 0)) return std::nullopt;
+  return ssim_sum / pixels;
+}
+
+std::optional<double> ErrorSums::NoiseBoundDb() const {
+  if (!(values > 0)) return std::nullopt;
+  return CappedDb(noise_var_over_peak2 / values);
+}
+
+Image EvaluationMask(const Image& geometric_mask, const Image& photo, double saturation,
+                     double erode_px, size_t* excluded) {
+  REFLCAP_CHECK(geometric_mask.width == photo.width && geometric_mask.height == photo.height);
+  Image mask = ErodeMask(geometric_mask, erode_px);
+  size_t dropped = 0;
+  for (int y = 0; y < mask.height; ++y) {
+    for (int x = 0; x < mask.width; ++x) {
+      if (!In(mask, x, y)) continue;
+      bool valid = true;
+      for (int c = 0; c < photo.channels; ++c) {
+        const float v = photo.at(x, y, c);
+        if (!std::isfinite(v) || (saturation > 0 && v >= saturation)) valid = false;
+      }
+      if (!valid) {
+        mask.at(x, y) = 0;
+        ++dropped;
+      }
+    }
+  }
+  if (excluded) *excluded = dropped;
+  return mask;
+}
+
+std::vector<uint8_t> LabelRegions(const Image& aux, const Image& eval_mask,
+                                  const ScoreOptions& options) {
+  using render::kAuxCastShadow;
+  using render::kAuxCosThetaI;
+  using render::kAuxCosThetaO;
+  using render::kAuxCurvature;
+  using render::kAuxMask;
+  REFLCAP_CHECK(aux.channels == render::kAuxChannelCount);
+  REFLCAP_CHECK(aux.width == eval_mask.width && aux.height == eval_mask.height);
+  const int w = aux.width, h = aux.height;
+  // -1 background, 0 facing away from the light, 1 lit, 2 cast-shadowed.
+  auto state = [&](int x, int y) {
+    const float* a = aux.pixel(x, y);
+    if (!(a[kAuxMask] > 0.5f)) return -1;
+    if (a[kAuxCastShadow] > 0.5f) return 2;
+    return a[kAuxCosThetaI] > 0 ? 1 : 0;
+  };
+  Image boundary(w, h, 1, 0.0f);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const int s = state(x, y);
+      if (s < 1) continue;
+      const int nb[4][2] = {{x + 1, y}, {x - 1, y}, {x, y + 1}, {x, y - 1}};
+      for (const auto& q : nb) {
+        if (q[0] < 0 || q[1] < 0 || q[0] >= w || q[1] >= h) continue;
+        const int t = state(q[0], q[1]);
+        if ((s == 1 && t == 2) || (s == 2 && t == 1)) boundary.at(x, y) = 1;
+      }
+    }
+  }
+  const Image near_edge = DilateMask(boundary, options.shadow_edge_px);
+  std::vector<uint8_t> bits(size_t(w) * h, 0);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      if (!In(eval_mask, x, y)) continue;
+      const float* a = aux.pixel(x, y);
+      uint8_t b = 0;
+      if (near_edge.at(x, y) > 0.5f) b |= 1u << kShadowEdge;
+      if (a[kAuxCurvature] > options.high_curvature) b |= 1u << kHighCurvatureRegion;
+      if (a[kAuxCosThetaI] < options.grazing_cos || a[kAuxCosThetaO] < options.grazing_cos) {
+        b |= 1u << kGrazing;
+      }
+      if (b == 0) b = 1u << kElsewhere;
+      bits[size_t(y) * w + x] = b;
+    }
+  }
+  return bits;
+}
+
+float ToneMap(float x, double inv_mean) {
+  const double y = std::max(0.0, double(x)) * inv_mean;
+  if (!std::isfinite(y)) return std::isnan(y) ? 0.0f : 1.0f;
+  return float(std::pow(y / (1 + y), 1 / kToneMapGamma));
+}
+
+double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ssim_map) {
+  REFLCAP_CHECK(a.width == b.width && a.height == b.height && a.channels == b.channels);
+  REFLCAP_CHECK(eval_mask.width == a.width && eval_mask.height == a.height);
+  if (ssim_map) *ssim_map = Image(a.width, a.height, 1, 0.0f);
+  // Work on the bounding box of the evaluated pixels: windows only use evaluated pixels, so
+  // nothing outside it matters (and objects often fill a tenth of the frame).
+  int x0 = a.width, y0 = a.height, x1 = -1, y1 = -1;
+  for (int y = 0; y < a.height; ++y) {
+    for (int x = 0; x < a.width; ++x) {
+      if (!(eval_mask.at(x, y, 0) > 0.5f)) continue;
+      x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+    }
+  }
+  if (x1 < 0) return 0;
+  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  const size_t n = size_t(w) * h;
+  auto full = [&](size_t i) { return (size_t(y0) + i / size_t(w)) * a.width + x0 + i % size_t(w); };
+  const std::vector<double> kernel = GaussianKernel();
+  std::vector<double> weight(n);
+  for (size_t i = 0; i < n; ++i) weight[i] = eval_mask.data[full(i) * eval_mask.channels] > 0.5f ? 1 : 0;
+  const std::vector<double> weight_sum = Blur(weight, w, h, kernel);
+  const double c1 = kSsimK1 * kSsimK1, c2 = kSsimK2 * kSsimK2;  // L = 1
+  std::vector<double> per_pixel(n, 0.0);
+  std::vector<double> wa(n), wb(n), waa(n), wbb(n), wab(n);
+  for (int c = 0; c < a.channels; ++c) {
+    for (size_t i = 0; i < n; ++i) {
+      const size_t f = full(i);
+      const double x = a.data[f * a.channels + c], y = b.data[f * b.channels + c];
+      wa[i] = weight[i] * x;
+      wb[i] = weight[i] * y;
+      waa[i] = weight[i] * (x * x);
+      wbb[i] = weight[i] * (y * y);
+      wab[i] = weight[i] * (x * y);
+    }
+    const auto ma = Blur(wa, w, h, kernel), mb = Blur(wb, w, h, kernel);
+    const auto maa = Blur(waa, w, h, kernel), mbb = Blur(wbb, w, h, kernel);
+    const auto mab = Blur(wab, w, h, kernel);
+    for (size_t i = 0; i < n; ++i) {
+      if (weight[i] == 0) continue;
+      const double norm = 1 / weight_sum[i];  // > 0: the pixel itself is in the window
+      const double mu_a = ma[i] * norm, mu_b = mb[i] * norm;
+      const double var_a = maa[i] * norm - mu_a * mu_a, var_b = mbb[i] * norm - mu_b * mu_b;
+      const double cov = mab[i] * norm - mu_a * mu_b;
+      per_pixel[i] += ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
+                      ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+    }
+  }
+  double sum = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (weight[i] == 0) continue;
+    const double v = per_pixel[i] / a.channels;
+    sum += v;
+    if (ssim_map) ssim_map->data[full(i)] = float(v);
+  }
+  return sum;
+}
+
+ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval_mask,
+                      const Image* aux, const std::optional<NoiseModel>& noise,
+                      const ScoreOptions& options) {
+  REFLCAP_CHECK(photo.channels == 3 && render.channels == 3);
+  REFLCAP_CHECK(photo.width == render.width && photo.height == render.height);
+  REFLCAP_CHECK(eval_mask.width == photo.width && eval_mask.height == photo.height);
+  const int w = photo.width, h = photo.height;
+  const size_t n = photo.PixelCount();
+  std::vector<size_t> pixels;
+  for (size_t i = 0; i < n; ++i) {
+    if (eval_mask.data[i * eval_mask.channels] > 0.5f) pixels.push_back(i);
+  }
+  ImageScore score;
+  score.has_noise = noise.has_value();
+  double peak = 0, mean = 0;
+  std::array<double, 3> pr{}, rr{};
+  for (size_t i : pixels) {
+    for (int c = 0; c < 3; ++c) {
+      const double p = photo.data[i * 3 + c], r = render.data[i * 3 + c];
+      peak = std::max(peak, p);
+      mean += p;
+      pr[c] += p * r;
+      rr[c] += r * r;
+    }
+  }
+  if (!pixels.empty()) mean /= double(pixels.size() * 3);
+  score.peak = peak;
+  score.tone_mean = mean;
+  // A photograph that is nowhere positive has no peak: errors are then relative to 1.
+  const double p2 = peak > 0 ? peak * peak : 1.0;
+  const double inv_mean = mean > 0 ? 1 / mean : 1.0;
+  for (int c = 0; c < 3; ++c) score.scale[c] = rr[c] > 0 ? pr[c] / rr[c] : 1.0;
+
+  std::vector<uint8_t> bits;
+  if (aux) {
+    bits = LabelRegions(*aux, eval_mask, options);
+    score.has_regions = true;
+  }
+  for (size_t i : pixels) {
+    ErrorSums raw_px, scaled_px;
+    raw_px.pixels = scaled_px.pixels = 1;
+    raw_px.values = scaled_px.values = 3;
+    for (int c = 0; c < 3; ++c) {
+      const double p = photo.data[i * 3 + c], r = render.data[i * 3 + c];
+      const double e = r - p, es = score.scale[c] * r - p;
+      raw_px.sse += e * e;
+      raw_px.sse_over_peak2 += e * e / p2;
+      raw_px.photo_sq += p * p;
+      scaled_px.sse += es * es;
+      scaled_px.sse_over_peak2 += es * es / p2;
+      scaled_px.photo_sq += p * p;
+      if (noise) raw_px.noise_var_over_peak2 += noise->Variance(r) / p2;
+    }
+    score.raw.Add(raw_px);
+    score.scaled.Add(scaled_px);
+    if (aux) {
+      for (int k = 0; k < kRegionCount; ++k) {
+        if (bits[i] & (1u << k)) score.regions[k].Add(raw_px);
+      }
+    }
+  }
+
+  Image photo_tm(w, h, 3), render_tm(w, h, 3), scaled_tm(w, h, 3);
+  for (size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      photo_tm.data[i * 3 + c] = ToneMap(photo.data[i * 3 + c], inv_mean);
+      render_tm.data[i * 3 + c] = ToneMap(render.data[i * 3 + c], inv_mean);
+      scaled_tm.data[i * 3 + c] = ToneMap(float(score.scale[c] * render.data[i * 3 + c]), inv_mean);
+    }
+  }
+  score.raw.ssim_sum = SsimSum(photo_tm, render_tm, eval_mask);
+  score.scaled.ssim_sum = SsimSum(photo_tm, scaled_tm, eval_mask);
+
+  if (options.keep_figure_data) {
+    score.error = Image(w, h, 1, -1.0f);
+    for (size_t i : pixels) {
+      double e = 0;
+      for (int c = 0; c < 3; ++c) e += std::abs(double(render.data[i * 3 + c]) - photo.data[i * 3 + c]);
+      score.error.data[i] = float(e / 3 / std::sqrt(p2));
+    }
+    score.photo_tm = std::move(photo_tm);
+    score.render_tm = std::move(render_tm);
+    score.region_bits = std::move(bits);
+  }
+  return score;
+}
+
+}  // namespace reflcap::validate

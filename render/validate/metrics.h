@@ -1,0 +1,161 @@
+#pragma once
+// Image metrics of `reflcap validate`: a re-render r against a photograph p, on the object pixels
+// only, raw and after a per-channel least-squares scale, overall and by region, and the PSNR that
+// the capture's own noise allows. Definitions (README.md, "reflcap validate", states them too):
+//
+// Evaluated pixels. E = erode(render mask AND capture mask, kErodePx), where the capture mask is
+// the photograph's silhouette mask when the capture has one (masks/{camera}_{angle:03d}.png of
+// synthetic and Blender captures, normal_map.mask of normal-map captures) — so a silhouette pixel
+// that the photograph's pixel filter or a misaligned mesh makes partly background is never
+// scored — minus pixels where the photograph is not finite or has a channel at or above its
+// images[].saturation. Erosion is by a disc: a pixel stays when every pixel within Euclidean
+// distance kErodePx of it (outside the image counts as background) is in the mask.
+//
+// Peak P: the largest photograph value over E and the three channels (per image).
+// HDR PSNR = 10 log10(P² / MSE), MSE over E and the three channels; capped at kMaxPsnrDb (a
+// perfect match reports the cap, never Inf). Relative RMSE = sqrt(Σ(r - p)² / Σ p²).
+// Tone map (SSIM and figures): t(x) = (y / (1 + y))^(1/2.2), y = max(x, 0) / m, m = the mean of the
+// photograph over E and channels — the same t, with the photograph's m, for both images.
+// SSIM (Wang, Bovik, Sheikh, Simoncelli 2004) on t(p) and t(r) per channel: 11x11 Gaussian window,
+// σ = 1.5 px, C1 = (0.01 L)², C2 = (0.03 L)², L = 1, with window statistics restricted to E
+// (Gaussian weights renormalised over the window's pixels in E, so background never enters),
+// averaged over E and the three channels.
+// Scaled variant (Stanford-ORB): r is first multiplied per channel by s_c = Σ_E p_c r_c / Σ_E r_c²
+// (1 when Σ r_c² = 0), which removes any global exposure / albedo-scale error; same metrics.
+// Regions (each within E), from the render's aux buffers (reference_renderer.h):
+//   shadow_edge     within kShadowEdgePx (Euclidean) of a cast-shadow boundary: a pair of
+//                   4-neighbouring object pixels of which one is cast-shadowed and the other lit
+//                   (cos θi > 0, not shadowed)
+//   high_curvature  aux curvature (scale-free, 1 on a sphere) > kHighCurvature
+//   grazing         cos θi < kGrazingCos or cos θo < kGrazingCos (includes pixels facing away
+//                   from the light)
+//   elsewhere       none of the three above; a pixel may be in several of the first three.
+// Noise bound: with the capture's noise model (synthetic ground_truth.noise) the variance of a
+// photograph value whose noise-free value is v is σ_p² max(v, 0) + σ_r²; using the render as v,
+// PSNR_bound = 10 log10(P² / mean variance over E and channels) — what a perfect re-render scores
+// on average.
+// Pooling over images: squared errors are divided by their own image's P² and pooled over all
+// evaluated pixels of all images (PSNR = -10 log10(Σ e²/P² / N)), so each image weighs by its
+// pixel count and one image gives its own PSNR; relative RMSE pools Σ(r - p)² and Σ p²; SSIM
+// averages over all evaluated pixels; the bound pools variance / P².
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "engine/image/image.h"
+
+namespace reflcap::validate {
+
+// Erosion of the evaluation mask, px: the silhouette band where a photograph mixes object and
+// background (pixel filter up to ~1.5 px, calibration error) stays out.
+constexpr double kErodePx = 2;
+// Distance to a cast-shadow boundary, px, within which a pixel counts as shadow_edge: a soft
+// (area-light) penumbra or a shadow shifted by a pixel of calibration error lies in it.
+constexpr double kShadowEdgePx = 3;
+// cos θ below which a direction is grazing (75.5 degrees).
+constexpr double kGrazingCos = 0.25;
+// Scale-free curvature above which a pixel is high_curvature: a radius of curvature below a
+// quarter of the object's size (a sphere reads 1).
+constexpr double kHighCurvature = 4;
+// PSNR reported for an exact match (and the largest ever reported): float32 rounding of values
+// near the peak limits any meaningful HDR PSNR to about 20 log10(2^24) = 144 dB.
+constexpr double kMaxPsnrDb = 150;
+// Tone-map gamma.
+constexpr double kToneMapGamma = 2.2;
+// SSIM constants (Wang et al. 2004), for images in [0, L], L = 1.
+constexpr int kSsimRadius = 5;          // 11x11 window
+constexpr double kSsimSigma = 1.5;      // px
+constexpr double kSsimK1 = 0.01, kSsimK2 = 0.03;
+
+enum Region : int { kShadowEdge = 0, kHighCurvatureRegion, kGrazing, kElsewhere, kRegionCount };
+// "shadow_edge", "high_curvature", "grazing", "elsewhere".
+const char* RegionName(int region);
+
+// Mask helpers: 1-channel images, a pixel is "in" when > 0.5; results hold 0 or 1.
+Image ErodeMask(const Image& mask, double radius_px);
+Image DilateMask(const Image& mask, double radius_px);
+// Channel 0 of `image` thresholded at 0.5 (any channel count).
+Image BinaryMask(const Image& image);
+
+// Photon + read noise of a photograph: var(v) = photon_sigma_at_1² max(v, 0) + read_sigma².
+struct NoiseModel {
+  double photon_sigma_at_1 = 0;
+  double read_sigma = 0;
+  double Variance(double v) const;
+};
+// ground_truth.noise of a capture's ground_truth block (compact JSON text, "" when absent);
+// nullopt when absent or malformed.
+std::optional<NoiseModel> NoiseModelFromGroundTruth(const std::string& ground_truth_json);
+
+// Sums from which every metric derives; additive over pixels and images.
+struct ErrorSums {
+  double pixels = 0;               // evaluated pixels
+  double values = 0;               // pixel channels (3 per pixel)
+  double sse = 0;                  // Σ (r - p)²
+  double sse_over_peak2 = 0;       // Σ (r - p)² / P²  (P of each value's own image)
+  double photo_sq = 0;             // Σ p²
+  double noise_var_over_peak2 = 0; // Σ var(r) / P²   (0 when no noise model)
+  double ssim_sum = 0;             // Σ over pixels of the SSIM averaged over channels
+
+  void Add(const ErrorSums& other);
+  // nullopt when there are no values; capped at kMaxPsnrDb.
+  std::optional<double> PsnrDb() const;
+  // nullopt when Σ p² = 0 and the error is not 0.
+  std::optional<double> RelRmse() const;
+  std::optional<double> Ssim() const;
+  std::optional<double> NoiseBoundDb() const;  // needs noise_var_over_peak2 > 0 or caps
+};
+
+// What one photograph scores.
+struct ImageScore {
+  double peak = 0;                  // P
+  double tone_mean = 0;             // m of the tone map
+  std::array<double, 3> scale{};    // least-squares s_c
+  size_t excluded_invalid = 0;      // geometric-mask pixels dropped as saturated / non-finite
+  ErrorSums raw, scaled;
+  std::array<ErrorSums, kRegionCount> regions;  // raw
+  bool has_regions = false;
+  bool has_noise = false;
+  // Figure data when requested (else empty): tone-mapped photograph and render (3 channels, the
+  // whole image), and the error |r - p| / P averaged over channels (1 channel; -1 outside E).
+  Image photo_tm, render_tm, error;
+  // Region bits per pixel (1 << Region), 0 outside E; when requested and aux is given.
+  std::vector<uint8_t> region_bits;
+};
+
+struct ScoreOptions {
+  double erode_px = kErodePx;
+  double shadow_edge_px = kShadowEdgePx;
+  double grazing_cos = kGrazingCos;
+  double high_curvature = kHighCurvature;
+  bool keep_figure_data = false;
+};
+
+// The evaluation mask E: erode(geometric_mask, erode_px) minus pixels of `photo` that are not
+// finite or have a channel >= saturation (when saturation > 0). `excluded` (optional) receives how
+// many eroded-mask pixels were dropped that way.
+Image EvaluationMask(const Image& geometric_mask, const Image& photo, double saturation,
+                     double erode_px, size_t* excluded);
+
+// Region bits (1 << Region) of the pixels in `eval_mask`, from aux buffers with the channels of
+// render::AuxChannel.
+std::vector<uint8_t> LabelRegions(const Image& aux, const Image& eval_mask,
+                                  const ScoreOptions& options);
+
+// Mean SSIM over `eval_mask` of two tone-mapped 3-channel images (definition above); returns the
+// per-pixel sum (mean over channels), to be divided by the pixel count. `ssim_map` (optional,
+// 1 channel) receives the per-pixel value.
+double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ssim_map = nullptr);
+
+// The tone map t(x) with 1/m = inv_mean.
+float ToneMap(float x, double inv_mean);
+
+// Scores `render` against `photo` on `eval_mask` (from EvaluationMask). aux (optional) gives the
+// regions; noise (optional) the bound. Images must have the same size (checked).
+ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval_mask,
+                      const Image* aux, const std::optional<NoiseModel>& noise,
+                      const ScoreOptions& options);
+
+}  // namespace reflcap::validate

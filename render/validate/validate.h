@@ -1,0 +1,61 @@
+#pragma once
+// `reflcap validate`: re-renders against photographs — metrics (metrics.h), figures (figures.h)
+// and a self-contained HTML report — as a library, so tests and `reflcap run` call it directly.
+//
+// Inputs: a capture/1, a render folder in the layout of render/reference/render_capture.h
+// (re-renders, masks/, aux/), optionally the fit folder (FIT/fit_report.json, FIT/status.exr) and
+// the sample store (SAMPLES/coverage.png) for the report.
+// Output folder (the caller stages it):
+//   metrics.json              images (per-image metrics), overall (pooled + per-image mean),
+//                             capture, renders, split, definitions, timings
+//   figures/<key>.png         photograph | re-render | error heat map, for up to max_figures
+//                             images (evenly spaced over the selection when there are more)
+//   figures/<key>_regions.png the region labels of that image
+//   status.png, coverage.png  fit status map with legend, sample coverage (when given and present)
+//   report.html               everything above on one page (relative links)
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "engine/capture/capture.h"
+#include "engine/core/status.h"
+#include "render/reference/render_capture.h"
+#include "render/validate/metrics.h"
+
+namespace reflcap::validate {
+
+// Figures written at most, by default: enough to see every camera/light family of a holdout split,
+// few enough to keep a report's page light (each figure is ~3x an image).
+constexpr int kDefaultMaxFigures = 24;
+
+struct ValidateOptions {
+  render::SplitSelection split = render::SplitSelection::kHoldout;
+  std::filesystem::path fit_dir;      // empty: no fit section
+  std::filesystem::path samples_dir;  // empty: no coverage section
+  int max_figures = kDefaultMaxFigures;  // >= 0
+  // Error heat-map range as a fraction of the peak; 0 = automatic: the 99th percentile of the error
+  // over the figure images, rounded up to 1, 2, 2.5 or 5 x 10^k, shared by all figures.
+  double error_scale = 0;
+  ScoreOptions score;
+  Status Validate() const;
+};
+
+struct ValidateSummary {
+  size_t images = 0;
+  size_t pixels = 0;
+  size_t figures = 0;
+  std::optional<double> psnr_db, rel_rmse, ssim;                       // overall, raw
+  std::optional<double> scaled_psnr_db, scaled_rel_rmse, scaled_ssim;  // overall, LS-scaled
+  std::optional<double> noise_bound_psnr_db;                           // when the noise is known
+  double seconds = 0;
+};
+
+// Scores every selected photograph against its re-render in `renders_dir` and writes the report
+// into `out_dir` (created if missing). NotFound names a missing render or mask; InvalidArgument a
+// size mismatch; FailedPrecondition when no image is selected.
+StatusOr<ValidateSummary> RunValidation(const Capture& capture,
+                                        const std::filesystem::path& renders_dir,
+                                        const std::filesystem::path& out_dir,
+                                        const ValidateOptions& options);
+
+}  // namespace reflcap::validate

@@ -1,0 +1,223 @@
+// Re-rendering synthetic captures from their ground truth, and validating those renders: the
+// renders reproduce the noise-free photographs, and on noisy photographs validate's PSNR sits at
+// the bound that the capture's noise model allows (the issue's "within 0.5 dB" check, done with the
+// ground-truth parameters in place of a fit).
+#include "render/validate/validate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "acquire/synth/synth.h"
+#include "engine/core/atomic_file.h"
+#include "engine/image/exr_io.h"
+#include "engine/image/png_io.h"
+#include "render/reference/render_capture.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap::validate {
+namespace {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+// The render uses synth's renderer, atlas and parameters (float EXR: exact), but the mesh comes back
+// from mesh.obj, whose loader re-normalises the corner normals (in double): a normal may move by an
+// ulp (6e-8). A lobe b^n turns a relative change db/b of its base into n db/b of its value, and the
+// sharpest synthetic material has n = 250: up to ~3e-5 relative. Most values are bit-identical.
+constexpr double kReproductionRelTolerance = 1e-4;
+// Values below this are compared in absolute terms (relative error of a near-black value is noise).
+constexpr double kReproductionAbsFloor = 1e-3;
+// The issue's bar: holdout PSNR within 0.5 dB of the PSNR that the capture's noise allows.
+constexpr double kNoiseBoundToleranceDb = 0.5;
+
+StatusOr<synth::SynthSummary> Synth(const fs::path& out, double noise, int image_size, int lights) {
+  synth::SynthOptions o;
+  o.noise = noise;
+  o.texels = 4000;
+  o.image_size = image_size;
+  o.cameras = 2;
+  o.lights = lights;
+  o.steps = 4;
+  return synth::WriteSyntheticCapture(o, out);
+}
+
+TEST(RenderCapture, GroundTruthReproducesNoiseFreePhotographs) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.0, 48, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  render::CaptureRenderOptions options;
+  options.split = render::SplitSelection::kAll;
+  auto summary = render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(summary->images, capture->images.size());
+  double max_abs = 0, max_rel = 0;
+  size_t compared = 0, identical = 0;
+  for (const CaptureImage& image : capture->images) {
+    auto photo = ReadExrRgb(capture->Resolve(image.file));
+    auto rendered = ReadExrRgb(dir / "renders" / render::RenderPathFor(image.file));
+    ASSERT_TRUE(photo.ok() && rendered.ok());
+    ASSERT_EQ(photo->data.size(), rendered->data.size());
+    for (size_t i = 0; i < photo->data.size(); ++i) {
+      const double d = std::abs(double(photo->data[i]) - rendered->data[i]);
+      max_abs = std::max(max_abs, d);
+      max_rel = std::max(max_rel, d / std::max(kReproductionAbsFloor, double(std::abs(photo->data[i]))));
+      ++compared;
+      identical += d == 0;
+    }
+    ASSERT_TRUE(fs::is_regular_file(dir / "renders" / render::MaskPathFor(image.file)));
+    std::vector<std::string> names;
+    auto aux = ReadExrChannels(dir / "renders" / render::AuxPathFor(image.file), &names);
+    ASSERT_TRUE(aux.ok());
+    EXPECT_EQ(names, render::AuxChannelNames());
+  }
+  std::printf("render from gt/params.exr vs noise-free synth photographs: %zu values, %.4f %% "
+              "bit-identical, max |diff| %.3g, max relative %.3g\n", compared,
+              100.0 * double(identical) / double(compared), max_abs, max_rel);
+  EXPECT_LE(max_rel, kReproductionRelTolerance);
+  // The render report names the backend and every image.
+  const Json report = Json::parse(ReadTextFile(dir / "renders/render_report.json").value());
+  EXPECT_EQ(report["backend"], "cpu");
+  EXPECT_EQ(report["device"], "cpu");
+  EXPECT_EQ(report["images"].size(), capture->images.size());
+  EXPECT_EQ(report["geometry"], "mesh");
+}
+
+TEST(Validate, HoldoutPsnrFromGroundTruthMeetsTheNoiseBound) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.02, 96, 3).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  ValidateOptions options;
+  options.max_figures = 4;
+  auto summary = RunValidation(*capture, dir / "renders", dir / "report", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  ASSERT_TRUE(summary->psnr_db && summary->noise_bound_psnr_db);
+  std::printf("holdout (%zu images, %zu pixels, noise 0.02): PSNR %.3f dB, noise bound %.3f dB, "
+              "difference %+.3f dB\n", summary->images, summary->pixels, *summary->psnr_db,
+              *summary->noise_bound_psnr_db, *summary->psnr_db - *summary->noise_bound_psnr_db);
+  EXPECT_NEAR(*summary->psnr_db, *summary->noise_bound_psnr_db, kNoiseBoundToleranceDb);
+  EXPECT_EQ(summary->images, capture->CountSplit(Split::kHoldout));
+  EXPECT_EQ(summary->figures, 4u);
+
+  const std::string text = ReadTextFile(dir / "report/metrics.json").value();
+  EXPECT_EQ(text.find("Infinity"), std::string::npos);
+  EXPECT_EQ(text.find("NaN"), std::string::npos);
+  const Json metrics = Json::parse(text);
+  for (const char* key : {"images", "overall", "capture", "renders", "split", "timings"}) {
+    EXPECT_TRUE(metrics.contains(key)) << key;
+  }
+  EXPECT_EQ(metrics["split"], "holdout");
+  const Json& overall = metrics["overall"];
+  for (const char* key : {"psnr_db", "rel_rmse", "ssim", "scaled", "regions", "noise_bound_psnr_db"}) {
+    EXPECT_TRUE(overall.contains(key)) << key;
+  }
+  for (const char* region : {"shadow_edge", "high_curvature", "grazing", "elsewhere"}) {
+    ASSERT_TRUE(overall["regions"].contains(region)) << region;
+    EXPECT_GT(overall["regions"][region]["pixels"].get<int>(), 0) << region;
+  }
+  const Json& first = metrics["images"][0];
+  for (const char* key : {"file", "camera", "light", "turntable_deg", "psnr_db", "rel_rmse", "ssim",
+                          "scaled", "regions", "noise_bound_psnr_db"}) {
+    EXPECT_TRUE(first.contains(key)) << key;
+  }
+  // Every image scores near its own bound too (fewer pixels: looser, 1 dB).
+  for (const Json& image : metrics["images"]) {
+    EXPECT_NEAR(image["psnr_db"].get<double>(), image["noise_bound_psnr_db"].get<double>(), 1.0)
+        << image["file"];
+  }
+  int figures = 0;
+  for (const auto& e : fs::directory_iterator(dir / "report/figures")) {
+    figures += e.path().filename().string().find("_regions") == std::string::npos;
+  }
+  EXPECT_EQ(figures, 4);
+  const std::string html = ReadTextFile(dir / "report/report.html").value();
+  EXPECT_NE(html.find("<img src=\"figures/"), std::string::npos);
+  EXPECT_NE(html.find("Where the error is"), std::string::npos);
+  EXPECT_EQ(html.find("</html>") + 8, html.size());
+}
+
+TEST(Validate, ExactRendersReportTheFiniteCapAndMissingFitFilesAreSkipped) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.0, 32, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  // Renders replaced by the photographs themselves: an exact match.
+  for (const CaptureImage& image : capture->images) {
+    if (image.split != Split::kHoldout) continue;
+    fs::copy_file(capture->Resolve(image.file), dir / "renders" / render::RenderPathFor(image.file),
+                  fs::copy_options::overwrite_existing);
+  }
+  ValidateOptions options;
+  options.fit_dir = dir / "no_fit";
+  options.samples_dir = dir / "no_samples";
+  auto summary = RunValidation(*capture, dir / "renders", dir / "report", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(*summary->psnr_db, kMaxPsnrDb);
+  EXPECT_EQ(*summary->rel_rmse, 0.0);
+  EXPECT_DOUBLE_EQ(*summary->ssim, 1.0);
+  const std::string text = ReadTextFile(dir / "report/metrics.json").value();
+  EXPECT_EQ(Json::parse(text)["overall"]["psnr_db"].get<double>(), kMaxPsnrDb);
+  EXPECT_EQ(text.find("Infinity"), std::string::npos);
+  const std::string html = ReadTextFile(dir / "report/report.html").value();
+  EXPECT_NE(html.find("fit_report.json is absent"), std::string::npos);
+  EXPECT_NE(html.find("coverage.png is absent"), std::string::npos);
+  // A missing render is NotFound, naming the file.
+  size_t holdout = 0;
+  while (capture->images[holdout].split != Split::kHoldout) ++holdout;
+  const std::string missing_file = render::RenderPathFor(capture->images[holdout].file);
+  fs::remove(dir / "renders" / missing_file);
+  auto missing = RunValidation(*capture, dir / "renders", dir / "report2", {});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find(missing_file), std::string::npos) << missing.status().message();
+}
+
+TEST(Validate, ReportGathersTheFitStatusMapAndTheCoverageMap) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.01, 32, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  // A fit folder as the fitter may write it: a summary with status names, and a status map with
+  // one code per texel (-1 where there is none).
+  testing::WriteText(dir / "fit/fit_report.json",
+                     R"({"texels": 100, "status_names": ["converged", "max_iterations"],
+                         "timings": {"total_s": 1.5}})");
+  Image status(20, 10, 1, -1.0f);
+  for (int x = 0; x < 10; ++x) status.at(x, 5) = float(x % 2);
+  ASSERT_TRUE(WriteExr(dir / "fit/status.exr", status).ok());
+  fs::create_directories(dir / "samples");
+  ASSERT_TRUE(WritePng(dir / "samples/coverage.png", Image(8, 8, 3, 0.5f)).ok());
+  ValidateOptions options;
+  options.fit_dir = dir / "fit";
+  options.samples_dir = dir / "samples";
+  options.max_figures = 0;
+  auto summary = RunValidation(*capture, dir / "renders", dir / "report", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_EQ(summary->figures, 0u);
+  EXPECT_TRUE(fs::is_regular_file(dir / "report/status.png"));
+  EXPECT_TRUE(fs::is_regular_file(dir / "report/coverage.png"));
+  const std::string html = ReadTextFile(dir / "report/report.html").value();
+  EXPECT_NE(html.find("<img src=\"status.png\""), std::string::npos);
+  EXPECT_NE(html.find("<img src=\"coverage.png\""), std::string::npos);
+  EXPECT_NE(html.find("timings.total_s"), std::string::npos);
+  EXPECT_NE(html.find("render (cpu, cpu): total_s"), std::string::npos);
+}
+
+TEST(RenderCapture, FileLayoutKeys) {
+  EXPECT_EQ(render::ImageKey("images/0003.exr"), "0003");
+  EXPECT_EQ(render::ImageKey("raw/a.png"), "raw/a");
+  EXPECT_EQ(render::RenderPathFor("images/0003.exr"), "images/0003.exr");
+  EXPECT_EQ(render::RenderPathFor("images/001.png"), "images/001.exr");
+  EXPECT_EQ(render::MaskPathFor("images/0003.exr"), "masks/0003.png");
+  EXPECT_EQ(render::AuxPathFor("images/0003.exr"), "aux/0003.exr");
+}
+
+}  // namespace
+}  // namespace reflcap::validate

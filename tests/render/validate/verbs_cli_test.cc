@@ -1,0 +1,176 @@
+// The `render`, `validate` and `import-diligent` verbs of the reflcap executable: exit codes
+// (1 usage, 2 bad input naming the file, 3 unavailable backend), staging, and a synth -> render ->
+// validate and an import-diligent -> info round trip.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/atomic_file.h"
+#include "engine/image/exr_io.h"
+#include "engine/image/png_io.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap {
+namespace {
+namespace fs = std::filesystem;
+
+struct CliResult {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
+                              " 2>" + err.string();
+  const int status = std::system(command.c_str());
+  CliResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadTextFile(out).value();
+  r.err = ReadTextFile(err).value();
+  return r;
+}
+
+// A tiny noisy synthetic capture, made once for this file.
+const fs::path& TinyCapture() {
+  static testing::ScratchDir* dir = new testing::ScratchDir();
+  static const fs::path capture = [] {
+    testing::ScratchDir logs;
+    const fs::path out = *dir / "tiny";
+    CliResult r = RunCli("synth --quiet --out " + out.string() +
+                             " --texels 3000 --image-size 48 --cameras 2 --lights 2 --steps 4 --noise 0.02",
+                         logs);
+    REFLCAP_CHECK(r.exit_code == 0) << r.err;
+    return out;
+  }();
+  return capture;
+}
+
+TEST(VerbsCli, HelpAndUsageErrors) {
+  testing::ScratchDir dir;
+  for (const char* verb : {"render", "validate", "import-diligent"}) {
+    CliResult r = RunCli(std::string(verb) + " --help", dir);
+    EXPECT_EQ(r.exit_code, 0) << verb;
+    EXPECT_NE(r.out.find(std::string("usage: reflcap ") + verb), std::string::npos) << r.out;
+    EXPECT_EQ(RunCli(verb, dir).exit_code, 1) << verb << ": missing positionals";
+  }
+  const std::string cap = TinyCapture().string();
+  EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt", dir).exit_code, 1) << "no --out";
+  CliResult r = RunCli("render " + cap + " " + cap + "/gt --out x --split sometimes", dir);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--split"), std::string::npos) << r.err;
+  EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt --out x --supersample 0", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt --out x --backend metal", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("validate " + cap + " r --out x --max-figures -1", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("import-diligent d --out x --holdout-every 1", dir).exit_code, 1);
+  EXPECT_FALSE(fs::exists("x"));
+}
+
+TEST(VerbsCli, VulkanBackendIsUnavailable) {
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string();
+  CliResult r = RunCli("render " + cap + " " + cap + "/gt --out " + (dir / "r").string() +
+                           " --backend vulkan", dir);
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("not available until the Vulkan renderer lands"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "r"));
+}
+
+TEST(VerbsCli, MissingInputsExitWithTwoAndNameTheFile) {
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string();
+  CliResult r = RunCli("render " + (dir / "none").string() + " " + cap + "/gt --out " + (dir / "r").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("none"), std::string::npos) << r.err;
+  r = RunCli("render " + cap + " " + (dir / "nofit").string() + " --out " + (dir / "r").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("params.exr"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "r"));
+  r = RunCli("validate " + cap + " " + (dir / "norenders").string() + " --out " + (dir / "v").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("norenders"), std::string::npos) << r.err;
+  fs::create_directories(dir / "empty_renders");
+  r = RunCli("validate " + cap + " " + (dir / "empty_renders").string() + " --out " + (dir / "v").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("empty_renders/images/"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "v"));
+  r = RunCli("import-diligent " + (dir / "noobject").string() + " --out " + (dir / "c").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("noobject"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "c"));
+}
+
+TEST(VerbsCli, RenderThenValidatePrintsTheNoiseBound) {
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string();
+  const std::string renders = (dir / "renders").string(), report = (dir / "report").string();
+  CliResult r = RunCli("render --quiet " + cap + " " + cap + "/gt --out " + renders, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("on the cpu"), std::string::npos) << r.out;
+  EXPECT_TRUE(fs::is_regular_file(dir / "renders/render_report.json"));
+  EXPECT_TRUE(fs::is_directory(dir / "renders/aux"));
+  // A non-empty output is refused without --overwrite, and kept.
+  r = RunCli("render --quiet " + cap + " " + cap + "/gt --out " + renders, dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("not empty"), std::string::npos) << r.err;
+  EXPECT_TRUE(fs::is_regular_file(dir / "renders/render_report.json"));
+  r = RunCli("render --quiet " + cap + " " + cap + "/gt/params.exr --out " + renders + " --overwrite", dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+
+  r = RunCli("validate --quiet " + cap + " " + renders + " --out " + report, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("noise bound PSNR"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("LS-scaled"), std::string::npos) << r.out;
+  const auto metrics = nlohmann::json::parse(ReadTextFile(dir / "report/metrics.json").value());
+  EXPECT_EQ(metrics["split"], "holdout");
+  EXPECT_TRUE(fs::is_regular_file(dir / "report/report.html"));
+  // No staging leftovers beside the outputs.
+  for (const auto& e : fs::directory_iterator(dir.path())) {
+    EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
+  }
+}
+
+TEST(VerbsCli, ImportDiligentThenInfo) {
+  testing::ScratchDir dir;
+  // A 9x9 DiLiGenT-like object: a flat disc facing the camera under 4 lights, 8-bit images.
+  const fs::path obj = dir / "disc";
+  fs::create_directories(obj);
+  Image normals(9, 9, 3, 0.0f), mask(9, 9, 3, 0.0f), photo(9, 9, 3, 0.0f);
+  for (int y = 0; y < 9; ++y) {
+    for (int x = 0; x < 9; ++x) {
+      if ((x - 4) * (x - 4) + (y - 4) * (y - 4) > 12) continue;
+      normals.at(x, y, 2) = 1;
+      for (int c = 0; c < 3; ++c) mask.at(x, y, c) = photo.at(x, y, c) = 1;
+    }
+  }
+  ASSERT_TRUE(WriteExr(obj / "normals.exr", normals).ok());
+  ASSERT_TRUE(WritePng(obj / "mask.png", mask).ok());
+  std::string names, dirs, ints;
+  for (int i = 1; i <= 4; ++i) {
+    char name[16];
+    std::snprintf(name, sizeof name, "%03d.png", i);
+    ASSERT_TRUE(WritePng(obj / name, photo).ok());
+    names += std::string(name) + "\n";
+    dirs += "0 0.6 0.8\n";
+    ints += "1 1 1\n";
+  }
+  testing::WriteText(obj / "filenames.txt", names);
+  testing::WriteText(obj / "light_directions.txt", dirs);
+  testing::WriteText(obj / "light_intensities.txt", ints);
+  const std::string out = (dir / "capture").string();
+  CliResult r = RunCli("import-diligent --quiet " + obj.string() + " --out " + out + " --holdout-every 2", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("train 2, holdout 2"), std::string::npos) << r.out;
+  r = RunCli("info " + out, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("orthographic"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("normal map"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("lights      4 (0 point, 4 directional)"), std::string::npos) << r.out;
+}
+
+}  // namespace
+}  // namespace reflcap
