@@ -1,0 +1,185 @@
+#include "engine/fit/fit_driver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <future>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/atomic_file.h"
+#include "engine/core/log.h"
+#include "engine/core/progress.h"
+#include "engine/fit/problem.h"
+#include "engine/image/exr_io.h"
+#include "engine/texel/brdf_maps.h"
+#include "engine/texel/sample_store.h"
+
+namespace reflcap::fit {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+Json Percentiles(std::vector<double> v) {
+  if (v.empty()) return Json::object();
+  std::sort(v.begin(), v.end());
+  auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
+  return Json{{"p10", at(0.10)}, {"p50", at(0.50)}, {"p90", at(0.90)}, {"p99", at(0.99)}, {"max", v.back()}};
+}
+
+}  // namespace
+
+Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, int lobes,
+                    const std::vector<TexelFit>& fits) {
+  REFLCAP_CHECK(fits.size() == atlas.TexelCount());
+  BrdfMaps params, sigma;
+  params.num_lobes = sigma.num_lobes = lobes;
+  params.texels.reserve(fits.size());
+  sigma.texels.reserve(fits.size());
+  Image status(atlas.width, atlas.height, 3, 0.0f);
+  for (size_t p = 0; p < status.PixelCount(); ++p) status.data[3 * p] = float(gpu::shared::kFitStatusNoTexel);
+  for (size_t t = 0; t < fits.size(); ++t) {
+    params.texels.push_back(fits[t].params);
+    sigma.texels.push_back(fits[t].sigma);
+    float* px = &status.data[3 * size_t(atlas.pixel_of_texel[t])];
+    px[0] = float(int(fits[t].status));
+    px[1] = float(fits[t].iterations);
+    px[2] = fits[t].cost;
+  }
+  REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "params.exr", params, atlas));
+  REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "sigma.exr", sigma, atlas));
+  return WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost"});
+}
+
+StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
+                               const FitOptions& options, bool overwrite) {
+  const auto start = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter, CreateFitter(backend, options.threads));
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
+  const SampleStoreInfo& info = store->info();
+  REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
+
+  TexelAtlas atlas;
+  atlas.width = info.atlas_width;
+  atlas.height = info.atlas_height;
+  atlas.pixel_of_texel = info.pixel_of_texel;
+  if (atlas.pixel_of_texel.size() != info.texels) {
+    return DataLossError(samples.string(), ": atlas.bin holds ", atlas.pixel_of_texel.size(),
+                         " texels but store.json says ", info.texels);
+  }
+  for (uint32_t p : atlas.pixel_of_texel) {
+    if (uint64_t(p) >= uint64_t(atlas.width) * uint64_t(atlas.height)) {
+      return DataLossError(samples.string(), ": atlas.bin: pixel ", p, " outside the ",
+                           atlas.width, "x", atlas.height, " atlas");
+    }
+  }
+
+  std::vector<TexelFit> fits(info.texels);
+  // Texels no chunk holds keep this: zero parameters, too few samples.
+  for (TexelFit& f : fits) {
+    BeginTexel(options.lobes, &f);
+    f.status = FitStatus::kTooFewSamples;
+  }
+  FitRunSummary summary;
+  summary.device = fitter->device();
+  Progress progress("fit", info.texels);
+  double read_seconds = 0, fit_seconds = 0;
+  std::vector<TexelFit> results;
+  auto read = [&store](uint32_t index) { return store->ReadChunk(index); };
+  std::future<StatusOr<TexelSampleChunk>> next;
+  if (info.chunks > 0) next = std::async(std::launch::async, read, 0u);
+  for (uint32_t c = 0; c < info.chunks; ++c) {
+    const auto read_start = std::chrono::steady_clock::now();
+    StatusOr<TexelSampleChunk> chunk = next.get();
+    read_seconds += Seconds(read_start);
+    if (!chunk.ok()) return chunk.status();
+    if (c + 1 < info.chunks) next = std::async(std::launch::async, read, c + 1);
+    if (uint64_t(chunk->first_texel) + chunk->texel_count > info.texels) {
+      return DataLossError(store->ChunkPath(c).string(), ": texels ", chunk->first_texel, "..",
+                           chunk->first_texel + chunk->texel_count, " beyond the store's ",
+                           info.texels);
+    }
+    const auto fit_start = std::chrono::steady_clock::now();
+    REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, options, &results));
+    fit_seconds += Seconds(fit_start);
+    std::copy(results.begin(), results.end(), fits.begin() + chunk->first_texel);
+    progress.Advance(chunk->texel_count);
+  }
+  progress.Finish();
+
+  const auto write_start = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, options.lobes, fits));
+
+  std::vector<double> costs, chi2;
+  double iterations = 0;
+  int max_iterations = 0;
+  size_t lambert_only = 0;
+  const int params_per_problem = NumParams(options.lobe_model, options.lobes);
+  for (const TexelFit& f : fits) {
+    ++summary.status_counts[int(f.status)];
+    if (f.residuals == 0) continue;
+    ++summary.texels_with_samples;
+    costs.push_back(f.cost);
+    const int dof = f.residuals - params_per_problem * ProblemsPerTexel(options.lobe_model);
+    if (dof > 0) chi2.push_back(2.0 * f.cost / dof);
+    iterations += f.iterations;
+    max_iterations = std::max(max_iterations, f.iterations);
+    lambert_only += f.lambert_only;
+  }
+  summary.texels = info.texels;
+  summary.fit_seconds = fit_seconds;
+  const double fits_count = double(info.texels) * ProblemsPerTexel(options.lobe_model);
+  summary.fits_per_second = fit_seconds > 0 ? fits_count / fit_seconds : 0;
+
+  Json counts = Json::object();
+  for (int s = 0; s < kFitStatusCount; ++s) counts[FitStatusName(FitStatus(s))] = summary.status_counts[s];
+  Json report = {
+      {"format", "reflcap-fit/1"},
+      {"samples", fs::absolute(samples).string()},
+      {"backend", BackendName(backend)},
+      {"device", summary.device},
+      {"options",
+       {{"lobes", options.lobes},
+        {"lobe_model", LobeModelName(options.lobe_model)},
+        {"init", InitSchemeName(options.init)},
+        {"loss", LossKindName(options.loss)},
+        {"loss_scale", options.loss_scale},
+        {"max_iterations", options.max_iterations},
+        {"first_stage_iterations", options.first_stage_iterations},
+        {"start_exponent", options.start_exponent},
+        {"min_samples", options.min_samples},
+        {"min_cos_theta", options.min_cos_theta},
+        {"highlight_cone_deg", options.highlight_cone_deg},
+        {"evidence_sigmas", options.evidence_sigmas},
+        {"step_tolerance", options.step_tolerance},
+        {"cost_tolerance", options.cost_tolerance},
+        {"gradient_tolerance", options.gradient_tolerance}}},
+      {"texels", info.texels},
+      {"texels_with_samples", summary.texels_with_samples},
+      {"fits", size_t(fits_count)},
+      {"status_counts", counts},
+      {"lambert_only", lambert_only},
+      {"cost_percentiles", Percentiles(costs)},
+      {"reduced_chi2_percentiles", Percentiles(chi2)},
+      {"iterations", {{"mean", summary.texels_with_samples ? iterations / summary.texels_with_samples : 0.0},
+                      {"max", max_iterations}}},
+      {"fits_per_second", summary.fits_per_second},
+      {"texels_per_second", fit_seconds > 0 ? info.texels / fit_seconds : 0.0},
+  };
+  const double write_seconds_so_far = Seconds(write_start);
+  summary.total_seconds = Seconds(start);
+  report["timings_s"] = {{"read_wait", read_seconds},
+                         {"fit", fit_seconds},
+                         {"write_maps", write_seconds_so_far},
+                         {"total", summary.total_seconds}};
+  REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / "fit_report.json", report.dump(2) + "\n"));
+  REFLCAP_RETURN_IF_ERROR(staging.Commit());
+  return summary;
+}
+
+}  // namespace reflcap::fit

@@ -1,0 +1,43 @@
+#pragma once
+// `reflcap fit` as a library call: stream a sample store's chunks through a Fitter (reading the
+// next chunk while the current one is fitted, so at most two chunks are in memory) and write the
+// FIT folder:
+//   FIT/params.exr       BrdfMaps (engine/texel/brdf_maps.h channel names), atlas layout
+//   FIT/sigma.exr        the same channels, each parameter's standard deviation (-1 = unknown)
+//   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
+//                        `iterations` and `cost` (final 1/2 sum rho(r^2))
+//   FIT/fit_report.json  backend, device, options, texels, counts per status, cost and reduced
+//                        chi^2 percentiles, iterations, fits_per_second, timings
+// The folder is staged and moved into place only when complete (StagingDir).
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "engine/core/status.h"
+#include "engine/fit/fitter.h"
+#include "engine/mesh/texel_atlas.h"
+
+namespace reflcap::fit {
+
+struct FitRunSummary {
+  size_t texels = 0;
+  size_t texels_with_samples = 0;
+  std::array<size_t, kFitStatusCount> status_counts{};
+  double fit_seconds = 0;
+  double total_seconds = 0;
+  double fits_per_second = 0;  // problems (channel fits for aniso/iso, texels for shared) per s
+  std::string device;
+};
+
+// Reads SAMPLES, fits with `backend`, writes FIT (refused when it exists non-empty, unless
+// overwrite). Errors: NotFound/DataLoss from the store, Unavailable for a backend this build or
+// machine lacks, InvalidArgument for bad options.
+StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
+                               const std::filesystem::path& out, Backend backend,
+                               const FitOptions& options, bool overwrite);
+
+// Writes params.exr, sigma.exr and status.exr for per-texel fits in `atlas` layout into `dir`.
+Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, int lobes,
+                    const std::vector<TexelFit>& fits);
+
+}  // namespace reflcap::fit

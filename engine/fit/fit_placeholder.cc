@@ -1,1 +1,0 @@
-// Placeholder until the fitting engine lands.

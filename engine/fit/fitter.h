@@ -1,0 +1,161 @@
+#pragma once
+// The fitting engine's interface: one Fitter per backend behind one factory (after Ceres'
+// DenseCholesky::Create), the options every backend honours alike, and the per-texel outcome.
+//
+// Per-texel outcomes are data, not errors (Gpufit, TinySolver): every texel gets a TexelFit with
+// finite parameters, a FitStatus, its final cost and iteration count, and parameter standard
+// deviations. A Fit call fails (Status) only when the options are invalid or a backend fails.
+//
+// Backends:
+//   kCpu    the batched CPU path (engine/fit/batched_fitter.cc): several problems in lock-step
+//           across SIMD lanes, all cores, no heap allocation per texel. The default.
+//   kCeres  the reference (engine/fit/ceres_fitter.cc): one small ceres::Problem per fitting
+//           problem, automatic derivatives, same model, bounds, start and stages. For
+//           cross-checks and as the benchmarks' baseline.
+//   kVulkan the GPU path: the same LM as kCpu, constants in shaders/shared/fit_status.h.
+//           Unavailable until its issue lands.
+// CreateScalarFitter gives the readable one-problem-at-a-time path in float or double
+// (engine/fit/lm.h), which the batched path must match.
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "engine/brdf/lafortune.h"
+#include "engine/core/status.h"
+#include "engine/fit/model.h"
+#include "engine/texel/samples.h"
+#include "shaders/shared/fit_status.h"
+
+namespace reflcap::fit {
+
+enum class Backend { kCpu, kCeres, kVulkan };
+const char* BackendName(Backend backend);  // "cpu", "ceres", "vulkan"
+StatusOr<Backend> ParseBackend(const std::string& name);
+
+// Each value's condition is documented in shaders/shared/fit_status.h.
+enum class FitStatus : int {
+  kConverged = gpu::shared::kFitStatusConverged,
+  kMaxIterations = gpu::shared::kFitStatusMaxIterations,
+  kSingular = gpu::shared::kFitStatusSingular,
+  kTooFewSamples = gpu::shared::kFitStatusTooFewSamples,
+  kUnidentifiableLobe = gpu::shared::kFitStatusUnidentifiableLobe,
+  kNonFiniteInput = gpu::shared::kFitStatusNonFiniteInput,
+};
+constexpr int kFitStatusCount = gpu::shared::kFitStatusCount;
+// "converged", "max_iterations", "singular", "too_few_samples", "unidentifiable_lobe",
+// "non_finite_input" (the fit_report.json keys).
+const char* FitStatusName(FitStatus status);
+// The texel status of several problems (the three channels of aniso/iso): the most severe, in
+// the order non_finite_input > too_few_samples > unidentifiable_lobe > singular >
+// max_iterations > converged.
+FitStatus CombineStatus(FitStatus a, FitStatus b);
+
+// How the start values are chosen (seed.h documents both).
+enum class InitScheme {
+  kSeed,   // the seed's data-driven start (section 4.2) and two-stage LM (section 4.3)
+  kFixed,  // a fixed start in normalised units, one LM stage over all parameters
+};
+const char* InitSchemeName(InitScheme init);
+StatusOr<InitScheme> ParseInitScheme(const std::string& name);
+
+// Robust loss on the weighted residual r = sqrt(w) (f - y), in the σ units of the weights
+// (inverse variances, as samples.h defines them), with scale a = FitOptions::loss_scale:
+//   kNone    rho(s) = s                               (s = r^2; least squares)
+//   kHuber   rho(s) = s for s <= a^2, else 2 a sqrt(s) - a^2
+//   kCauchy  rho(s) = a^2 log(1 + s / a^2)
+// as Ceres' HuberLoss(a) and CauchyLoss(a); cost = 1/2 sum rho(r_i^2).
+enum class LossKind { kNone = 0, kHuber = 1, kCauchy = 2 };
+const char* LossKindName(LossKind loss);
+StatusOr<LossKind> ParseLossKind(const std::string& name);
+
+struct FitOptions {
+  // Lafortune lobes per texel, 0..3 (0 = Lambert only; at most 2 for the shared lobe model).
+  int lobes = 1;
+  // aniso (Cx, Cy, Cz, n per channel), iso (Cx = Cy) or shared (one shape, per-channel scale);
+  // see model.h.
+  LobeModel lobe_model = LobeModel::kAniso;
+  InitScheme init = InitScheme::kSeed;
+  LossKind loss = LossKind::kNone;
+  // Robust loss scale a in σ units of the sample weights, > 0. 3: samples more than 3 σ off
+  // (shadows, interreflections, misregistration) are down-weighted, Gaussian noise is not.
+  double loss_scale = 3.0;
+  // Evaluated LM steps per stage (the seed scheme runs two stages), in [1, 10000].
+  int max_iterations = 100;
+  // Cap of the seed scheme's first stage (C's only, n held at start_exponent), in [1, 10000].
+  // Stage 1 is there to bring the start lobe onto the data, not to converge: run to the end at
+  // a wrong exponent, it bends the C's to imitate the width that n should give (e.g. Cz < 0 for
+  // a sharp highlight fitted at n = 20), and stage 2 then starts in a wrong basin.
+  int first_stage_iterations = 3;
+  // The lobe exponent every start uses (the seed fixes n to a start value), in
+  // [kMinExponent, kMaxExponent]. 20: a mid-range gloss, lobe half-width ~15 degrees.
+  double start_exponent = 20.0;
+  // A problem needs at least max(min_samples, parameters + 1) valid samples for a lobe fit,
+  // else it is Lambert-only with kTooFewSamples. >= 1.
+  int min_samples = 8;
+  // Samples with cos(theta_i) or cos(theta_o) below this are masked (grazing directions: the
+  // shading normal's error dominates there). In [0, 1).
+  double min_cos_theta = 0.05;
+  // Lobe identifiability: some valid sample must see wo within this angle (degrees) of the
+  // mirror direction of wi, else kUnidentifiableLobe. In (0, 90].
+  double highlight_cone_deg = 10.0;
+  // Lobe evidence: the brightest excess over the start's Lambert level must exceed this many
+  // robust noise σ (from the lower quartile, problem.h) plus 2 % of that level, else the texel
+  // is fitted Lambert-only (lobe absent, status kConverged). >= 0.
+  double evidence_sigmas = 5.0;
+  // Stopping tests (lm.h): relative step in Jacobi-scaled coordinates, relative cost decrease,
+  // max-norm of the Jacobi-scaled gradient (normalised units). Each in [0, 1). 1e-5: two
+  // orders below the parameters' statistical error at 1 % noise and ~100 float ulps, so the
+  // float path can meet them; tighter only adds iterations.
+  double step_tolerance = 1e-5;
+  double cost_tolerance = 1e-5;
+  double gradient_tolerance = 1e-10;
+  // Worker threads (0 = all hardware threads).
+  int threads = 0;
+
+  Status Validate() const;
+  std::string ToString() const;
+};
+
+// One texel's result. params and sigma are natural units in brdf::BrdfParams layout (aniso
+// form for every lobe model, so a texture set reads the same whatever was fitted).
+struct TexelFit {
+  brdf::BrdfParams params;
+  // Standard deviation of every parameter slot of `params`, from (J^T J)^-1 scaled by the
+  // residual variance 2 cost / (residuals - free parameters), propagated through the map to
+  // natural units. -1 where unknown: parameters not fitted (the lobes of a Lambert-only fit),
+  // no redundancy (residuals <= free parameters), or a singular J^T J.
+  brdf::BrdfParams sigma;
+  FitStatus status = FitStatus::kTooFewSamples;
+  float cost = 0;        // 1/2 sum rho(r^2), r = sqrt(w) (f - y) in natural units; summed
+                         // over the texel's problems
+  int iterations = 0;    // evaluated LM steps over all stages; the max over the texel's problems
+  int samples = 0;       // valid samples used (the max over problems)
+  int residuals = 0;     // valid (sample, channel) residuals, summed over problems
+  bool lambert_only = false;  // some problem of the texel was fitted without lobes
+};
+
+// One Fit call at a time per Fitter (it reuses its per-worker workspaces); use one Fitter per
+// thread that fits.
+class Fitter {
+ public:
+  virtual ~Fitter() = default;
+  virtual Backend backend() const = 0;
+  // What runs the fits, e.g. "cpu: 2 threads, 16-lane batches (x86-64-v4 kernel)".
+  virtual std::string device() const = 0;
+  // Fits every texel of `chunk`; results->at(i) is texel chunk.first_texel + i (resized to
+  // chunk.texel_count). InvalidArgument for invalid options or an inconsistent chunk.
+  virtual Status Fit(const TexelSampleChunk& chunk, const FitOptions& options,
+                     std::vector<TexelFit>* results) = 0;
+};
+
+// kCpu, kCeres; kVulkan is Unavailable until the Vulkan fitting issue lands. threads: 0 = all.
+StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads = 0);
+// The scalar reference path (lm.h) in double or float, one problem at a time per thread.
+std::unique_ptr<Fitter> CreateScalarFitter(bool use_double, int threads = 0);
+
+// Lobe value at normal incidence, max(0, Cz)^n: the "peak" the accuracy tests compare (for a
+// mirror lobe it is the value at the mirror direction for every incidence).
+double LobePeak(const brdf::LobeParams& lobe);
+
+}  // namespace reflcap::fit

@@ -1,0 +1,547 @@
+// Preparation of fitting problems from samples and folding of solved problems into TexelFits
+// (see problem.h for the rules).
+#include "engine/fit/problem.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "engine/fit/seed.h"
+
+namespace reflcap::fit {
+namespace {
+
+// A sample's unit directions, or false when it is unusable: not finite (*nonfinite set), too
+// short, or grazing.
+bool SampleDirections(const BrdfSample& s, double min_cos, Vec3d* wi, Vec3d* wo, bool* nonfinite) {
+  for (int j = 0; j < 3; ++j) {
+    if (!std::isfinite(s.wi[j]) || !std::isfinite(s.wo[j])) {
+      *nonfinite = true;
+      return false;
+    }
+  }
+  *wi = Vec3d(s.wi[0], s.wi[1], s.wi[2]);
+  *wo = Vec3d(s.wo[0], s.wo[1], s.wo[2]);
+  const double ni = wi->norm(), no = wo->norm();
+  if (!(ni >= kMinDirectionNorm) || !(no >= kMinDirectionNorm)) return false;
+  *wi /= ni;
+  *wo /= no;
+  return wi->z() >= min_cos && wo->z() >= min_cos;
+}
+
+// Channel c of a sample is usable: finite value and weight (*nonfinite set otherwise), weight > 0.
+bool ChannelValid(const BrdfSample& s, int c, bool* nonfinite) {
+  if (!std::isfinite(s.value[c]) || !std::isfinite(s.weight[c])) {
+    *nonfinite = true;
+    return false;
+  }
+  return s.weight[c] > 0;
+}
+
+// The k-th smallest of v[0..n) (0-based), reordering v so that v[0..k) <= it: a quickselect
+// with a branch-free partition (x < pivot decided by arithmetic, not a branch), as the values
+// around a median are in random order and a branchy partition mispredicts half its compares.
+float SelectKth(float* v, int n, int k) {
+  int lo = 0, hi = n - 1;
+  while (lo < hi) {
+    const float a = v[lo], b = v[lo + (hi - lo) / 2], c = v[hi];
+    const float pivot = std::max(std::min(a, b), std::min(std::max(a, b), c));  // median of 3
+    int i = lo;
+    for (int j = lo; j <= hi; ++j) {  // [lo, i) < pivot
+      const float x = v[j];
+      v[j] = v[i];
+      v[i] = x;
+      i += x < pivot;
+    }
+    int e = i;
+    for (int j = i; j <= hi; ++j) {  // [i, e) == pivot
+      const float x = v[j];
+      v[j] = v[e];
+      v[e] = x;
+      e += !(pivot < x);
+    }
+    if (k < i) {
+      hi = i - 1;
+    } else if (k < e) {
+      return pivot;
+    } else {
+      lo = e;
+    }
+  }
+  return v[k];
+}
+
+// Median of v[0..n) (the upper one for even n); reorders v so that v[0..n/2) precede it. 0 for
+// n = 0.
+float Median(float* v, int n) {
+  if (n <= 0) return 0;
+  return SelectKth(v, n, n / 2);
+}
+
+struct ChannelStats {
+  double median = 0;  // normalised
+  double sigma = 0;   // (median - lower quartile) / 0.6745, normalised
+  int brightest = -1; // residual index (within the problem's arrays) of the largest excess
+  double excess = 0;  // its value above rho0 / pi
+};
+
+ChannelStats Stats(const ProblemArena& arena, size_t begin, int n, float* scratch) {
+  ChannelStats s;
+  if (n == 0) return s;
+  for (int i = 0; i < n; ++i) scratch[i] = arena.y[begin + i];
+  s.median = Median(scratch, n);
+  // The lower half now precedes the median: its median is the lower quartile.
+  const int half = n / 2;
+  const double q1 = half > 0 ? Median(scratch, half) : s.median;
+  s.sigma = (s.median - q1) / kQuartileToSigma;
+  s.excess = -1e300;
+  for (int i = 0; i < n; ++i) {
+    const double e = arena.y[begin + i] - s.median;  // rho0 / pi = median
+    if (e > s.excess) {
+      s.excess = e;
+      s.brightest = i;
+    }
+  }
+  return s;
+}
+
+bool HasEvidence(const ChannelStats& s, double evidence_sigmas) {
+  return s.brightest >= 0 &&
+         s.excess > evidence_sigmas * s.sigma + kEvidenceFloor * std::max(s.median, 0.0);
+}
+
+}  // namespace
+
+void ProblemArena::Reserve(size_t residuals, size_t max_samples) {
+  for (auto* v : {&xx, &yy, &zz, &y, &sw}) {
+    if (v->size() < residuals) v->resize(residuals);
+  }
+  if (scratch.size() < 3 * max_samples) scratch.resize(3 * max_samples);
+  if (products.size() < 3 * max_samples) products.resize(3 * max_samples);
+  if (src.size() < residuals) src.resize(residuals);
+}
+
+void PrepareTexel(const FitOptions& options, const ProblemLayout& layout,
+                  const BrdfSample* samples, size_t count, int texel, ProblemArena* arena,
+                  size_t* cursor, PreparedProblem* out) {
+  const LobeModel model = layout.model;
+  const int num_params = layout.NumParams();
+  bool nonfinite = false;
+
+  // 1. Directions once per sample (products and validity into the scratch), the cone test on
+  // the way; then the residuals of each channel, raw values and weights.
+  const double cone_cos = std::cos(DegToRad(options.highlight_cone_deg));
+  bool near_mirror = false;
+  float* products = arena->products.data();  // xx, yy, zz per sample; NaN marks unusable ones
+  for (size_t i = 0; i < count; ++i) {
+    const BrdfSample& s = samples[i];
+    Vec3d wi, wo;
+    float* p = products + 3 * i;
+    if (!SampleDirections(s, options.min_cos_theta, &wi, &wo, &nonfinite)) {
+      p[0] = std::numeric_limits<float>::quiet_NaN();
+      continue;
+    }
+    p[0] = float(wi.x() * wo.x());
+    p[1] = float(wi.y() * wo.y());
+    p[2] = float(wi.z() * wo.z());
+    bool any_channel = false;
+    for (int c = 0; c < 3; ++c) {
+      bool ignored = false;
+      any_channel = any_channel || ChannelValid(s, c, &ignored);
+    }
+    const double mirror_cos = -wi.x() * wo.x() - wi.y() * wo.y() + wi.z() * wo.z();
+    near_mirror = near_mirror || (any_channel && mirror_cos >= cone_cos);
+  }
+  const size_t base = *cursor;
+  size_t block_begin[4];
+  size_t at = base;
+  for (int c = 0; c < 3; ++c) {
+    block_begin[c] = at;
+    for (size_t i = 0; i < count; ++i) {
+      const float* p = products + 3 * i;
+      if (std::isnan(p[0])) continue;
+      if (!ChannelValid(samples[i], c, &nonfinite)) continue;
+      arena->xx[at] = p[0];
+      arena->yy[at] = p[1];
+      arena->zz[at] = p[2];
+      arena->y[at] = samples[i].value[c];
+      arena->sw[at] = samples[i].weight[c];
+      arena->src[at] = uint32_t(i);
+      ++at;
+    }
+  }
+  block_begin[3] = at;
+  *cursor = at;
+
+  // 2. Problems: normalisation, classification, start.
+  const int problems = ProblemsPerTexel(model);
+  for (int p = 0; p < problems; ++p) {
+    PreparedProblem& q = out[p];
+    q = PreparedProblem{};
+    q.layout = layout;
+    q.texel = texel;
+    q.problem = p;
+    q.nonfinite_input = nonfinite;
+    const int c_begin = model == LobeModel::kShared ? 0 : p;
+    const int c_end = model == LobeModel::kShared ? 3 : p + 1;
+    const size_t r0 = block_begin[c_begin], r1 = block_begin[c_end];
+    const int n = int(r1 - r0);
+    ResidualView& view = q.residuals;
+    view.xx = arena->xx.data() + r0;
+    view.yy = arena->yy.data() + r0;
+    view.zz = arena->zz.data() + r0;
+    view.y = arena->y.data() + r0;
+    view.sw = arena->sw.data() + r0;
+    for (int c = 0; c < 4; ++c) {
+      const int cc = std::min(c_begin + c, c_end);
+      view.begin[c] = int(block_begin[cc] - r0);
+    }
+    if (model != LobeModel::kShared) view.begin[1] = view.begin[2] = view.begin[3] = n;
+    q.samples = model == LobeModel::kShared ? n / 3 : n;
+
+    double scale = 0;
+    for (size_t r = r0; r < r1; ++r) scale = std::max(scale, double(std::abs(arena->y[r])));
+    // All-zero values: any scale works; 1 keeps the normalised values equal to the raw ones.
+    if (!(scale > 0)) scale = 1;
+    // Weights: divided by the mean of w (y / S)^2, so the weighted values have unit RMS and every
+    // weighted residual is O(1) whatever the noise model (inverse-variance weights of relative
+    // noise span 1e20 across a texel whose values span 1e10).
+    double weighted_sq = 0, weight_sum = 0;
+    for (size_t r = r0; r < r1; ++r) {
+      const double v = arena->y[r] / scale;
+      weighted_sq += arena->sw[r] * v * v;
+      weight_sum += arena->sw[r];
+    }
+    double weight_scale = n > 0 ? weighted_sq / n : 1.0;
+    if (!(weight_scale > 0)) weight_scale = n > 0 ? weight_sum / n : 1.0;  // all values 0
+    q.scale = scale;
+    q.weight_scale = weight_scale;
+    q.loss_scale = options.loss_scale / (std::sqrt(weight_scale) * scale);
+    for (size_t r = r0; r < r1; ++r) {
+      arena->y[r] = float(arena->y[r] / scale);
+      arena->sw[r] = float(std::sqrt(std::min(arena->sw[r] / weight_scale, kMaxNormalisedWeight)));
+    }
+
+    ParameterBounds(layout, q.lower, q.upper);
+    double* x = q.x0;
+    for (int j = 0; j < kMaxParams; ++j) x[j] = 0;
+
+    ChannelStats stats[3];
+    for (int c = c_begin; c < c_end; ++c) {
+      stats[c] = Stats(*arena, block_begin[c], int(block_begin[c + 1] - block_begin[c]),
+                       arena->scratch.data());
+      x[model == LobeModel::kShared ? c : 0] = std::max(0.0, kPi * stats[c].median);
+    }
+    if (n == 0) {
+      q.preset = FitStatus::kTooFewSamples;
+      q.lambert_only = true;
+      q.num_stages = 0;
+      for (int j = 0; j < num_params; ++j) x[j] = 0;
+      for (int k = 0; k < layout.lobes; ++k) x[ExponentIndex(model, k)] = brdf::kMinExponent;
+      continue;
+    }
+
+    bool lobe_fit = layout.lobes > 0;
+    if (q.samples < std::max(options.min_samples, num_params + 1)) {
+      q.preset = FitStatus::kTooFewSamples;
+      lobe_fit = false;
+    } else if (layout.lobes > 0 && !near_mirror) {
+      q.preset = FitStatus::kUnidentifiableLobe;
+      lobe_fit = false;
+    } else if (layout.lobes > 0) {
+      bool evidence = false;
+      for (int c = c_begin; c < c_end; ++c) evidence |= HasEvidence(stats[c], options.evidence_sigmas);
+      lobe_fit = evidence;
+    }
+
+    if (!lobe_fit && layout.lobes > 0) {
+      q.lambert_only = true;
+      for (int k = 0; k < layout.lobes; ++k) x[ExponentIndex(model, k)] = brdf::kMinExponent;
+      q.num_stages = 1;
+      q.stage_mask[0] = layout.LambertMask();
+      continue;
+    }
+    if (options.init == InitScheme::kFixed) {
+      FixedStart(layout, options.start_exponent, scale, x);
+      q.num_stages = 1;
+      q.stage_mask[0] = layout.AllMask();
+    } else {
+      // The seed's start: lobe k from the brightest sample of what the start so far leaves.
+      const double n0 = options.start_exponent;
+      for (int k = 0; k < layout.lobes; ++k) {
+        int best = -1;
+        double best_excess = 0;
+        const ProblemLayout before{model, k};
+        for (int r = 0; r < n; ++r) {
+          const int c = model == LobeModel::kShared
+                            ? (r < view.begin[1] ? 0 : r < view.begin[2] ? 1 : 2)
+                            : 0;
+          const double f = EvalModelDyn<double>(before, x, view.xx[r], view.yy[r], view.zz[r], c, nullptr);
+          const double e = view.y[r] - f;
+          if (best < 0 || e > best_excess) {
+            best = r;
+            best_excess = e;
+          }
+        }
+        if (best < 0 || (k > 0 && !(best_excess > 0))) {
+          // Nothing left to explain: a weaker, sharper copy of lobe 0.
+          const int o0 = LobeOffset(model, 0), ok = LobeOffset(model, k);
+          for (int j = 0; j < ParamsPerLobe(model); ++j) x[ok + j] = x[o0 + j];
+          const double n = std::min(n0 * std::pow(4.0, k), brdf::kMaxExponent);
+          x[ExponentIndex(model, k)] = n;
+          if (model == LobeModel::kShared) {
+            for (int c = 0; c < 3; ++c) x[ok + 3 + c] *= 0.1;
+          } else {
+            // Peak c^n of lobe 0 at its start n0 becomes a tenth of it at exponent n.
+            const double cz0 = x[o0 + (model == LobeModel::kAniso ? 2 : 1)];
+            const double peak = std::pow(std::max(cz0, 1e-3), n0) * 0.1;
+            const double ratio = std::pow(peak, 1.0 / n) / std::max(cz0, 1e-3);
+            for (int j = 0; j < ParamsPerLobe(model) - 1; ++j) x[ok + j] *= ratio;
+          }
+          continue;
+        }
+        const BrdfSample& s = samples[arena->src[r0 + size_t(best)]];
+        Vec3d wi, wo;
+        bool ignored = false;
+        SampleDirections(s, -1.0, &wi, &wo, &ignored);
+        double excess[3] = {best_excess, 0, 0};
+        if (model == LobeModel::kShared) {
+          const ProblemLayout before_c{model, k};
+          for (int c = 0; c < 3; ++c) {
+            bool nf = false;
+            if (!ChannelValid(s, c, &nf)) {
+              excess[c] = 0;
+              continue;
+            }
+            const float pxx = float(wi.x() * wo.x()), pyy = float(wi.y() * wo.y()),
+                        pzz = float(wi.z() * wo.z());
+            const double f = EvalModelDyn<double>(before_c, x, pxx, pyy, pzz, c, nullptr);
+            excess[c] = s.value[c] / scale - f;
+          }
+        }
+        SeedLobeStart(layout, k, wi, wo, excess, n0, x);
+      }
+      q.num_stages = layout.lobes > 0 ? 2 : 1;
+      q.stage_mask[0] = layout.lobes > 0 ? layout.LobeCMask() : layout.AllMask();
+      q.stage_mask[1] = layout.AllMask();
+    }
+  }
+  for (int p = 0; p < problems; ++p) {
+    for (int j = 0; j < out[p].layout.NumParams(); ++j) {
+      out[p].x0[j] = std::clamp(out[p].x0[j], out[p].lower[j], out[p].upper[j]);
+    }
+  }
+}
+
+void BeginTexel(int lobes, TexelFit* fit) {
+  *fit = TexelFit{};
+  fit->params.num_lobes = lobes;
+  fit->sigma.num_lobes = lobes;
+  fit->sigma.rho_d.fill(-1.0f);
+  for (auto& lobe : fit->sigma.lobes) {
+    for (auto& l : lobe) l = brdf::LobeParams{-1, -1, -1, -1};
+  }
+  fit->status = FitStatus::kConverged;
+}
+
+namespace {
+
+// Inverse of the free block of the packed symmetric matrix a (size n, mask free) through its
+// unit-diagonal Cholesky factorisation; false when a pivot of the unit-diagonal form is below
+// kLmSingularPivot (rank deficient). inv is dense n x n (row-major), zero outside the block.
+bool InvertFreeBlock(int n, uint32_t free, const double* a, double* inv) {
+  int idx[kMaxParams];
+  int m = 0;
+  for (int j = 0; j < n; ++j) {
+    if ((free >> j) & 1u) idx[m++] = j;
+  }
+  double scale[kMaxParams];
+  for (int i = 0; i < m; ++i) {
+    const double d = a[PackedIndex(idx[i], idx[i])];
+    // A parameter without any influence on the residuals: nothing determines it.
+    if (!(d > 1e-300)) return false;
+    scale[i] = 1.0 / std::sqrt(d);
+  }
+  double l[kMaxPacked];
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j <= i; ++j) {
+      const int p = std::max(idx[i], idx[j]), q = std::min(idx[i], idx[j]);
+      l[PackedIndex(i, j)] = a[PackedIndex(p, q)] * scale[i] * scale[j];
+    }
+  }
+  for (int j = 0; j < m; ++j) {
+    double d = l[PackedIndex(j, j)];
+    for (int k = 0; k < j; ++k) d -= l[PackedIndex(j, k)] * l[PackedIndex(j, k)];
+    if (!(d >= double(gpu::shared::kLmSingularPivot))) return false;
+    const double r = std::sqrt(d);
+    l[PackedIndex(j, j)] = r;
+    for (int i = j + 1; i < m; ++i) {
+      double s = l[PackedIndex(i, j)];
+      for (int k = 0; k < j; ++k) s -= l[PackedIndex(i, k)] * l[PackedIndex(j, k)];
+      l[PackedIndex(i, j)] = s / r;
+    }
+  }
+  for (int i = 0; i < n * n; ++i) inv[i] = 0;
+  for (int col = 0; col < m; ++col) {
+    double b[kMaxParams];
+    for (int i = 0; i < m; ++i) b[i] = i == col ? 1.0 : 0.0;
+    for (int i = 0; i < m; ++i) {
+      double s = b[i];
+      for (int k = 0; k < i; ++k) s -= l[PackedIndex(i, k)] * b[k];
+      b[i] = s / l[PackedIndex(i, i)];
+    }
+    for (int i = m - 1; i >= 0; --i) {
+      double s = b[i];
+      for (int k = i + 1; k < m; ++k) s -= l[PackedIndex(k, i)] * b[k];
+      b[i] = s / l[PackedIndex(i, i)];
+    }
+    for (int i = 0; i < m; ++i) inv[idx[i] * n + idx[col]] = b[i] * scale[i] * scale[col];
+  }
+  return true;
+}
+
+}  // namespace
+
+void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved, TexelFit* fit) {
+  const ProblemLayout& layout = q.layout;
+  const int n = layout.NumParams();
+  const int residuals = q.residuals.count();
+  FitStatus status = q.preset != FitStatus::kConverged ? q.preset : solved.status;
+
+  double inv[kMaxParams * kMaxParams];
+  int free_count = 0;
+  for (int j = 0; j < n; ++j) free_count += (solved.free_mask >> j) & 1u;
+  bool invertible = free_count > 0 && InvertFreeBlock(n, solved.free_mask, solved.a, inv);
+  if (!invertible && free_count > 0 && residuals > 0 &&
+      (status == FitStatus::kConverged || status == FitStatus::kMaxIterations)) {
+    status = FitStatus::kSingular;
+  }
+  if (q.nonfinite_input) status = FitStatus::kNonFiniteInput;
+
+  // Parameters in natural units.
+  ToBrdfParams(layout, solved.x, q.scale, q.problem, &fit->params);
+
+  // Standard deviations: Cov = s^2 (J^T J)^-1 on the free block, s^2 = 2 cost / (m - p),
+  // pushed through the map to natural units by a forward-difference Jacobian.
+  if (invertible && residuals > free_count) {
+    const double variance = 2.0 * solved.cost / double(residuals - free_count);
+    double slots[3 + 12 * brdf::kMaxLobes];
+    const int num_slots = OutputSlots(layout, solved.x, q.scale, slots);
+    double g[kMaxParams][3 + 12 * brdf::kMaxLobes] = {};
+    bool depends_on_fixed[3 + 12 * brdf::kMaxLobes] = {};
+    if (layout.model != LobeModel::kShared) {
+      // Analytic: rho = S rho'; C = C' r with r = S^(1/n), dC/dn = -C' r log(S) / n^2.
+      const bool iso = layout.model == LobeModel::kIso;
+      g[0][0] = q.scale;
+      for (int k = 0; k < layout.lobes; ++k) {
+        const int o = LobeOffset(layout.model, k), e = ExponentIndex(layout.model, k);
+        const double nexp = solved.x[e];
+        const double r = std::pow(q.scale, 1.0 / nexp);
+        const double dr_dn = -r * std::log(q.scale) / (nexp * nexp);
+        const int slot = 1 + 4 * k;
+        for (int f = 0; f < 3; ++f) {
+          const int param = iso ? o + (f < 2 ? 0 : 1) : o + f;
+          g[param][slot + f] = r;
+          g[e][slot + f] = solved.x[param] * dr_dn;
+        }
+        g[e][slot + 3] = 1;
+      }
+      for (int j = 0; j < n; ++j) {
+        if ((solved.free_mask >> j) & 1u) continue;
+        for (int i = 0; i < num_slots; ++i) depends_on_fixed[i] |= g[j][i] != 0;
+      }
+    } else {
+      for (int j = 0; j < n; ++j) {
+        double xp[kMaxParams];
+        for (int i = 0; i < n; ++i) xp[i] = solved.x[i];
+        // Step 1e-7 relative: forward-difference error ~1e-7, rounding error ~1e-9 in double.
+        double h = 1e-7 * std::max(1.0, std::abs(solved.x[j]));
+        if (xp[j] + h > q.upper[j]) h = -h;
+        xp[j] += h;
+        double moved[3 + 12 * brdf::kMaxLobes];
+        OutputSlots(layout, xp, q.scale, moved);
+        const bool is_free = (solved.free_mask >> j) & 1u;
+        for (int i = 0; i < num_slots; ++i) {
+          g[j][i] = (moved[i] - slots[i]) / h;
+          if (!is_free && g[j][i] != 0) depends_on_fixed[i] = true;
+        }
+      }
+    }
+    for (int i = 0; i < num_slots; ++i) {
+      double v = 0;
+      for (int a = 0; a < n; ++a) {
+        if (!((solved.free_mask >> a) & 1u)) continue;
+        for (int b = 0; b < n; ++b) {
+          if (!((solved.free_mask >> b) & 1u)) continue;
+          v += g[a][i] * inv[a * n + b] * g[b][i];
+        }
+      }
+      const double sigma = std::sqrt(std::max(0.0, variance * v));
+      const bool known = !depends_on_fixed[i] && std::isfinite(sigma) && sigma < 3.0e38;
+      *OutputSlotRef(layout, q.problem, i, &fit->sigma) = known ? float(sigma) : -1.0f;
+    }
+  }
+
+  fit->status = CombineStatus(fit->status, status);
+  const double cost = solved.cost * q.weight_scale * q.scale * q.scale;
+  fit->cost += std::isfinite(cost) ? float(std::min(cost, 3.0e38)) : 0.0f;
+  fit->iterations = std::max(fit->iterations, solved.iterations);
+  fit->samples = std::max(fit->samples, q.samples);
+  fit->residuals += residuals;
+  fit->lambert_only = fit->lambert_only || q.lambert_only;
+}
+
+namespace {
+
+template <typename T>
+struct ScalarSolve {
+  const PreparedProblem& q;
+  const LmSettings& settings;
+  LossKind loss;
+
+  template <LobeModel M, int K>
+  SolvedProblem operator()() const {
+    constexpr int P = NumParams(M, K);
+    SolvedProblem out;
+    T x[kMaxParams], lower[kMaxParams], upper[kMaxParams];
+    for (int j = 0; j < kMaxParams; ++j) {
+      x[j] = T(q.x0[j]);
+      lower[j] = T(q.lower[j]);
+      upper[j] = T(q.upper[j]);
+    }
+    LmState<T> state;
+    NormalEquations<T> neq;
+    for (int i = 0; i < kMaxPacked; ++i) state.at_x.a[i] = T(0);
+    state.at_x.cost = T(0);
+    for (int stage = 0; stage < q.num_stages; ++stage) {
+      const LmSettings stage_settings = StageSettings(settings, stage, q.num_stages);
+      LmBegin<T>(P, q.stage_mask[stage], x, &state);
+      while (state.phase != LmPhase::kDone) {
+        EvaluateNormalEquations<M, K, T>(q.residuals, state.x_new, loss, T(q.loss_scale), &neq);
+        LmAdvance<T, P>(stage_settings, lower, upper, neq, &state);
+      }
+      out.iterations += state.iterations;
+      for (int j = 0; j < P; ++j) x[j] = state.x[j];
+      out.status = state.status;
+      out.free_mask = state.free_mask;
+      if (state.status == FitStatus::kSingular && stage + 1 < q.num_stages && !std::isfinite(double(state.cost))) break;
+    }
+    for (int j = 0; j < kMaxParams; ++j) out.x[j] = double(x[j]);
+    for (int i = 0; i < PackedIndex(P, 0); ++i) out.a[i] = double(state.at_x.a[i]);
+    out.cost = double(state.at_x.cost);
+    return out;
+  }
+};
+
+}  // namespace
+
+template <typename T>
+SolvedProblem SolveScalar(const PreparedProblem& problem, const LmSettings& settings,
+                          LossKind loss) {
+  return DispatchLayout(problem.layout, ScalarSolve<T>{problem, settings, loss});
+}
+
+template SolvedProblem SolveScalar<float>(const PreparedProblem&, const LmSettings&, LossKind);
+template SolvedProblem SolveScalar<double>(const PreparedProblem&, const LmSettings&, LossKind);
+
+}  // namespace reflcap::fit

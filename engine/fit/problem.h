@@ -1,0 +1,115 @@
+#pragma once
+// From a texel's BrdfSamples to prepared fitting problems, and from solved problems back to a
+// TexelFit: the work every backend shares before and after its LM, so that all of them see the
+// same residuals, start values, stages and classification, and report alike.
+//
+// PrepareTexel, per texel (in double; deterministic, so float and double solvers get identical
+// inputs and the statuses decided here cannot differ between them):
+//   1. Masking. A sample with a non-finite direction component, and a channel with a non-finite
+//      value or weight, is dropped and flags the texel kNonFiniteInput. Directions are
+//      re-normalised (a direction shorter than kMinDirectionNorm is dropped). Samples with
+//      cos(theta_i) or cos(theta_o) < min_cos_theta (grazing) and channels with weight <= 0 are
+//      masked. Negative values are kept (noise around a dark texel is legitimately negative).
+//   2. Normalisation (model.h): scale S = the largest |value| of the problem's valid residuals
+//      (1 when all are 0); values y / S; weights divided by the mean of w (y / S)^2 (by the mean
+//      weight when every value is 0), so the weighted values have unit RMS. The least-squares
+//      problem is unchanged up to a constant factor, every weighted residual is O(1), the
+//      Jacobi scaling sees each parameter's influence, and J^T J stays in float range for values
+//      from 1e-6 to 1e4 and any noise model.
+//   3. Classification, in this order:
+//        valid samples < max(min_samples, parameters + 1)     → Lambert-only, kTooFewSamples
+//        lobes > 0 and no sample within highlight_cone_deg of the mirror configuration
+//                                                              → Lambert-only, kUnidentifiableLobe
+//        lobes > 0 and no lobe evidence (below)                → Lambert-only, lobe absent
+//      A Lambert-only problem has zero lobes (C = 0, s = 0) and fits only rho.
+//   4. Start values and stages: seed.h (StartValues).
+//
+// Lobe evidence: with rho0 the seed's start albedo (π x the median value) and σ the noise
+// estimated from the values' lower quartile (kQuartileToSigma), some valid value must exceed
+// rho0 / π by more than evidence_sigmas σ + kEvidenceFloor rho0 / π (any channel for shared).
+//
+// FinishProblem, per solved problem: the rank test on the final J^T J (kSingular), parameter
+// standard deviations, the map to natural units, and the texel's combined status.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "engine/fit/fitter.h"
+#include "engine/fit/lm.h"
+#include "engine/fit/model.h"
+#include "engine/texel/samples.h"
+
+namespace reflcap::fit {
+
+// A direction shorter than this is not a direction (a zeroed record); longer ones are
+// re-normalised, which absorbs float rounding in the resampler's unit vectors.
+constexpr double kMinDirectionNorm = 0.5;
+// Lobe evidence floor: a lobe peaking less than 2 % above the diffuse level cannot be told from
+// calibration error of the irradiance (a few percent), whatever the noise.
+constexpr double kEvidenceFloor = 0.02;
+// The noise σ of the lobe-evidence test is (median - lower quartile) / 0.6745, Gaussian σ from
+// the lower half of the values only: a lobe lifts the upper half (and would inflate a MAD), the
+// lower half is diffuse level plus noise (and shadows, which only make the test stricter).
+constexpr double kQuartileToSigma = 0.6745;
+
+// Storage for the residuals of a range of texels (one per worker, reused: it only grows, and
+// only in Reserve, outside the per-texel loop).
+struct ProblemArena {
+  std::vector<float> xx, yy, zz, y, sw;
+  std::vector<float> scratch;   // medians, one texel's channel values
+  std::vector<float> products;  // one texel's direction products per sample
+  std::vector<uint32_t> src;    // residual -> index of its sample within the texel
+  // Room for `residuals` residuals and one texel of up to `max_samples` samples.
+  void Reserve(size_t residuals, size_t max_samples);
+};
+
+struct PreparedProblem {
+  ProblemLayout layout;
+  int texel = 0;    // index within the chunk
+  int problem = 0;  // channel for aniso/iso, 0 for shared
+  ResidualView residuals;
+  int samples = 0;           // valid samples (shared: residuals / 3)
+  double scale = 1;          // normalisation S (natural value = S x normalised value)
+  double weight_scale = 1;   // raw weight = weight_scale x normalised weight
+                             // (natural cost = S^2 weight_scale x normalised cost)
+  double loss_scale = 1;     // robust scale in normalised residual units
+  bool nonfinite_input = false;
+  bool lambert_only = false;
+  FitStatus preset = FitStatus::kConverged;  // kTooFewSamples / kUnidentifiableLobe or converged
+  int num_stages = 0;
+  uint32_t stage_mask[2] = {0, 0};
+  double x0[kMaxParams] = {};
+  double lower[kMaxParams] = {};
+  double upper[kMaxParams] = {};
+};
+
+// Prepares the ProblemsPerTexel(layout.model) problems of one texel into out[]; residuals are
+// written to the arena from *cursor on (advanced). The arena must hold room for 3 x count more
+// residuals and one texel of `count` samples.
+void PrepareTexel(const FitOptions& options, const ProblemLayout& layout,
+                  const BrdfSample* samples, size_t count, int texel, ProblemArena* arena,
+                  size_t* cursor, PreparedProblem* out);
+
+// The outcome of a problem's LM: final parameters (normalised), the normal equations at them,
+// the free mask of the last stage, its status, and evaluated steps over all stages.
+struct SolvedProblem {
+  double x[kMaxParams] = {};
+  double a[kMaxPacked] = {};
+  double cost = 0;
+  uint32_t free_mask = 0;
+  FitStatus status = FitStatus::kConverged;
+  int iterations = 0;
+};
+
+// Resets a TexelFit before its problems are finished: zero parameters with `lobes` lobes,
+// sigma -1, status converged.
+void BeginTexel(int lobes, TexelFit* fit);
+// Folds one solved problem into its texel's TexelFit (parameters, sigma, status, cost, counts).
+void FinishProblem(const PreparedProblem& problem, const SolvedProblem& solved, TexelFit* fit);
+
+// Runs one prepared problem through all its stages with the scalar LM in T (float or double).
+template <typename T>
+SolvedProblem SolveScalar(const PreparedProblem& problem, const LmSettings& settings,
+                          LossKind loss);
+
+}  // namespace reflcap::fit

@@ -1,0 +1,152 @@
+// `reflcap fit` end to end: a small sample store written with the store API from synthetic
+// ground truth → the executable → FIT/params.exr, sigma.exr, status.exr, fit_report.json; and
+// its exit codes for usage errors (1), bad input (2) and the unavailable Vulkan backend (3).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/atomic_file.h"
+#include "engine/fit/fitter.h"
+#include "engine/fit/synthetic_samples.h"
+#include "engine/image/exr_io.h"
+#include "engine/texel/brdf_maps.h"
+#include "engine/texel/sample_store.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap::fit {
+namespace {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+constexpr int kAtlasSize = 20;      // 20 x 20 atlas
+constexpr uint32_t kTexels = 300;   // texel t at pixel 1 + t (pixel 0 and the tail hold none)
+constexpr uint32_t kChunkTexels = 128;
+
+struct CliResult {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+CliResult RunCli(const std::string& args, const reflcap::testing::ScratchDir& dir) {
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
+                              " 2>" + err.string();
+  const int status = std::system(command.c_str());
+  CliResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadTextFile(out).value();
+  r.err = ReadTextFile(err).value();
+  return r;
+}
+
+// Writes a store of kTexels synth-material texels in chunks of kChunkTexels.
+std::vector<brdf::BrdfParams> WriteStore(const fs::path& dir) {
+  fs::create_directories(dir);
+  const std::vector<brdf::BrdfParams> truth = SynthMaterialTexels(kTexels, 5);
+  SampleStoreInfo info;
+  info.texels = kTexels;
+  info.chunk_texels = kChunkTexels;
+  info.chunks = (kTexels + kChunkTexels - 1) / kChunkTexels;
+  info.atlas_width = info.atlas_height = kAtlasSize;
+  for (uint32_t t = 0; t < kTexels; ++t) info.pixel_of_texel.push_back(1 + t);
+  info.capture = "synthetic";
+  info.split = "train";
+  info.geometry = "mesh";
+  SyntheticSampleOptions so;
+  so.seed = 5;
+  for (uint32_t c = 0; c < info.chunks; ++c) {
+    const uint32_t first = c * kChunkTexels, count = std::min(kChunkTexels, kTexels - first);
+    const std::vector<brdf::BrdfParams> part(truth.begin() + first, truth.begin() + first + count);
+    const TexelSampleChunk chunk = MakeSyntheticChunk(part, so, first);
+    info.samples += chunk.samples.size();
+    REFLCAP_CHECK(WriteSampleChunk(dir / SampleChunkFileName(c), chunk).ok());
+  }
+  REFLCAP_CHECK(WriteSampleStoreInfo(dir, info).ok());
+  return truth;
+}
+
+TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
+  reflcap::testing::ScratchDir dir;
+  const std::vector<brdf::BrdfParams> truth = WriteStore(dir / "samples");
+  const fs::path out = dir / "fit";
+  const CliResult r = RunCli("fit " + (dir / "samples").string() + " --out " + out.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("converged"), std::string::npos) << r.out;
+
+  TexelAtlas atlas;
+  atlas.width = atlas.height = kAtlasSize;
+  for (uint32_t t = 0; t < kTexels; ++t) atlas.pixel_of_texel.push_back(1 + t);
+  auto params = ReadBrdfMaps(out / "params.exr", atlas);
+  ASSERT_TRUE(params.ok()) << params.status().ToString();
+  EXPECT_EQ(params->num_lobes, 1);
+  // Texel 1 is the glossy material: fitted to the accuracy.
+  EXPECT_NEAR(params->texels[1].rho_d[2], truth[1].rho_d[2], 0.01 * truth[1].rho_d[2]);
+  EXPECT_NEAR(params->texels[1].lobes[0][0].n, truth[1].lobes[0][0].n, 0.05 * truth[1].lobes[0][0].n);
+  auto sigma = ReadBrdfMaps(out / "sigma.exr", atlas);
+  ASSERT_TRUE(sigma.ok()) << sigma.status().ToString();
+  EXPECT_GT(sigma->texels[1].rho_d[0], 0.0f);
+
+  std::vector<std::string> names;
+  auto status = ReadExrChannels(out / "status.exr", &names);
+  ASSERT_TRUE(status.ok()) << status.status().ToString();
+  EXPECT_EQ(names, (std::vector<std::string>{"cost", "iterations", "status"}));
+  const int status_channel = 2;
+  EXPECT_EQ(status->at(0, 0, status_channel), -1.0f);  // pixel 0 holds no texel
+  EXPECT_EQ(status->at(1, 0, status_channel), float(int(FitStatus::kConverged)));
+
+  auto text = ReadTextFile(out / "fit_report.json");
+  ASSERT_TRUE(text.ok());
+  const Json report = Json::parse(*text);
+  EXPECT_EQ(report["backend"], "cpu");
+  EXPECT_EQ(report["texels"], kTexels);
+  EXPECT_EQ(report["status_counts"]["converged"], kTexels);
+  EXPECT_GT(report["fits_per_second"].get<double>(), 0);
+  for (const char* key : {"device", "cost_percentiles", "timings_s", "options", "iterations"}) {
+    EXPECT_TRUE(report.contains(key)) << key;
+  }
+
+  // An existing non-empty FIT is refused (bad input), replaced with --overwrite.
+  EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string(), dir).exit_code, 2);
+  EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string() +
+                       " --overwrite --backend ceres --lobe-model shared --loss cauchy --quiet",
+                   dir).exit_code, 0);
+  const Json ceres = Json::parse(ReadTextFile(out / "fit_report.json").value());
+  EXPECT_EQ(ceres["backend"], "ceres");
+  EXPECT_EQ(ceres["options"]["lobe_model"], "shared");
+}
+
+TEST(FitCli, ExitCodes) {
+  reflcap::testing::ScratchDir dir;
+  WriteStore(dir / "samples");
+  const std::string samples = (dir / "samples").string();
+  EXPECT_EQ(RunCli("fit --help", dir).exit_code, 0);
+  EXPECT_EQ(RunCli("fit", dir).exit_code, 1);                                   // no SAMPLES
+  EXPECT_EQ(RunCli("fit " + samples, dir).exit_code, 1);                        // no --out
+  EXPECT_EQ(RunCli("fit " + samples + " --out x --lobes 9", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("fit " + samples + " --out x --loss square", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("fit " + samples + " --out x --lobe-model shared --lobes 3", dir).exit_code, 1);
+  const CliResult missing = RunCli("fit " + (dir / "nothing").string() + " --out " + (dir / "o").string(), dir);
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("store.json"), std::string::npos) << missing.err;
+  const CliResult vulkan = RunCli("fit " + samples + " --out " + (dir / "v").string() + " --backend vulkan", dir);
+  EXPECT_EQ(vulkan.exit_code, 3);
+  EXPECT_NE(vulkan.err.find("Vulkan"), std::string::npos) << vulkan.err;
+  EXPECT_FALSE(fs::exists(dir / "v"));
+  // A corrupted chunk is bad input, and nothing is left behind.
+  {
+    std::FILE* f = std::fopen((dir / "samples" / SampleChunkFileName(1)).c_str(), "r+b");
+    ASSERT_NE(f, nullptr);
+    std::fseek(f, 200, SEEK_SET);
+    std::fputc(0x5a, f);
+    std::fclose(f);
+  }
+  const CliResult corrupt = RunCli("fit " + samples + " --out " + (dir / "c").string(), dir);
+  EXPECT_EQ(corrupt.exit_code, 2) << corrupt.err;
+  EXPECT_FALSE(fs::exists(dir / "c"));
+}
+
+}  // namespace
+}  // namespace reflcap::fit
