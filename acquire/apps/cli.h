@@ -60,5 +60,7 @@ int RunFit(int argc, char** argv);       // verb_fit.cc
 int RunRender(int argc, char** argv);    // verb_render.cc
 int RunValidate(int argc, char** argv);  // verb_validate.cc
 int RunImportDiligent(int argc, char** argv);  // verb_import_diligent.cc
+int RunRun(int argc, char** argv);       // verb_run.cc
+
 
 }  // namespace reflcap::cli

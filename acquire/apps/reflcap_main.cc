@@ -18,6 +18,7 @@ constexpr char kUsage[] =
     "  resample CAPTURE --out SAMPLES   photographs -> per-texel BRDF samples\n"
     "  fit SAMPLES --out FIT            per-texel Lambert + Lafortune fit\n"
     "  render CAPTURE FIT --out DIR     re-render photographs from a fit\n"
+    "  run CAPTURE --out DIR            resample -> fit -> render holdout -> validate\n"
     "  validate CAPTURE RENDERS --out REPORT   compare re-renders with photographs\n"
     "  import-diligent OBJECT_DIR --out CAPTURE   DiLiGenT object -> capture/1\n"
     "\n"
@@ -54,6 +55,7 @@ int main(int argc, char** argv) {
   if (verb == "resample") return cli::RunResample(argc, argv);
   if (verb == "fit") return cli::RunFit(argc, argv);
   if (verb == "render") return cli::RunRender(argc, argv);
+  if (verb == "run") return cli::RunRun(argc, argv);
   if (verb == "validate") return cli::RunValidate(argc, argv);
   if (verb == "import-diligent") return cli::RunImportDiligent(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);

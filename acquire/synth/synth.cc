@@ -46,7 +46,7 @@ struct Preset {
 };
 
 constexpr Preset kPresets[] = {
-    {"small", 20000, 192, 3, 5, 8, 40},
+    {"small", 20000, 192, 3, 8, 12, 40},
     {"medium", 150000, 384, 4, 8, 12, 96},
     {"million", 1000000, 1024, 4, 6, 12, 160},
 };

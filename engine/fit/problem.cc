@@ -402,19 +402,80 @@ bool InvertFreeBlock(int n, uint32_t free, const double* a, double* inv) {
 
 }  // namespace
 
-void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved, TexelFit* fit) {
+bool LobeExceedsEvidence(const ProblemLayout& layout, const double* x) {
+  const int per_problem_channels = ProblemChannels(layout.model);
+  for (int k = 0; k < layout.lobes; ++k) {
+    const double* lobe = x + LobeOffset(layout.model, k);
+    // Supremum of the base over unit wi, wo in the upper hemisphere: max(|Cx|, |Cy|, Cz+).
+    double c_max = 0, scale = 1;
+    switch (layout.model) {
+      case LobeModel::kAniso: c_max = std::max({std::abs(lobe[0]), std::abs(lobe[1]), lobe[2]}); break;
+      case LobeModel::kIso: c_max = std::max(std::abs(lobe[0]), lobe[1]); break;
+      case LobeModel::kShared:
+        c_max = std::max({std::abs(lobe[0]), std::abs(lobe[1]), 1.0});
+        scale = 0;
+        for (int c = 0; c < per_problem_channels; ++c) scale = std::max(scale, lobe[3 + c]);
+        break;
+    }
+    const double exponent = x[ExponentIndex(layout.model, k)];
+    if (c_max <= 0 || scale <= 0) continue;
+    if (std::log(scale) + exponent * std::log(c_max) > std::log(kMaxLobeSupremum)) return true;
+  }
+  return false;
+}
+
+double LambertFallback(const PreparedProblem& q, double* x) {
+  const ProblemLayout& layout = q.layout;
+  const ResidualView& r = q.residuals;
+  double cost = 0;
+  // Weighted least squares of rho / pi = y per channel block: rho = pi sum(w y) / sum(w).
+  for (int c = 0; c < ProblemChannels(layout.model); ++c) {
+    double sum_wy = 0, sum_w = 0;
+    for (int i = r.begin[c]; i < r.begin[c + 1]; ++i) {
+      const double w = double(r.sw[i]) * r.sw[i];
+      sum_wy += w * r.y[i];
+      sum_w += w;
+    }
+    const double rho = sum_w > 0 ? std::clamp(kPi * sum_wy / sum_w, q.lower[c], q.upper[c]) : 0.0;
+    x[c] = rho;
+    for (int i = r.begin[c]; i < r.begin[c + 1]; ++i) {
+      const double e = double(r.sw[i]) * (rho * kInvPi - r.y[i]);
+      cost += 0.5 * e * e;
+    }
+  }
+  for (int k = 0; k < layout.lobes; ++k) {
+    const int o = LobeOffset(layout.model, k), e = ExponentIndex(layout.model, k);
+    for (int j = o; j < o + ParamsPerLobe(layout.model); ++j) x[j] = (j == e) ? q.x0[e] : 0.0;
+  }
+  return cost;
+}
+
+void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, TexelFit* fit) {
   const ProblemLayout& layout = q.layout;
   const int n = layout.NumParams();
   const int residuals = q.residuals.count();
-  FitStatus status = q.preset != FitStatus::kConverged ? q.preset : solved.status;
+  FitStatus status = q.preset != FitStatus::kConverged ? q.preset : solved_in.status;
 
   double inv[kMaxParams * kMaxParams];
   int free_count = 0;
-  for (int j = 0; j < n; ++j) free_count += (solved.free_mask >> j) & 1u;
-  bool invertible = free_count > 0 && InvertFreeBlock(n, solved.free_mask, solved.a, inv);
+  for (int j = 0; j < n; ++j) free_count += (solved_in.free_mask >> j) & 1u;
+  bool invertible = free_count > 0 && InvertFreeBlock(n, solved_in.free_mask, solved_in.a, inv);
   if (!invertible && free_count > 0 && residuals > 0 &&
       (status == FitStatus::kConverged || status == FitStatus::kMaxIterations)) {
     status = FitStatus::kSingular;
+  }
+
+  // A lobe the data cannot pin down — the LM ended singular, or the lobe rises far above every
+  // sample somewhere on the hemisphere (extrapolation, not measurement) — is replaced by the
+  // problem's Lambert-only fit, and the status says why (kSingular, kUnidentifiableLobe).
+  SolvedProblem solved = solved_in;
+  bool fell_back = false;
+  if (layout.lobes > 0 && !q.lambert_only && residuals > 0 &&
+      (status == FitStatus::kSingular || LobeExceedsEvidence(layout, solved.x))) {
+    if (status != FitStatus::kSingular) status = FitStatus::kUnidentifiableLobe;
+    solved.cost = LambertFallback(q, solved.x);
+    fell_back = true;
+    invertible = false;  // sigma unknown: the normal equations belong to the discarded lobe fit
   }
   if (q.nonfinite_input) status = FitStatus::kNonFiniteInput;
 
@@ -488,7 +549,7 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved, TexelF
   fit->iterations = std::max(fit->iterations, solved.iterations);
   fit->samples = std::max(fit->samples, q.samples);
   fit->residuals += residuals;
-  fit->lambert_only = fit->lambert_only || q.lambert_only;
+  fit->lambert_only = fit->lambert_only || q.lambert_only || fell_back;
 }
 
 namespace {

@@ -17,6 +17,14 @@ enum class ShaderId {
   kChunkProbe,          // shaders/probe/chunk_probe.comp: in-place transform of a bound chunk
   kBenchEmpty,          // shaders/bench/empty.comp: empty kernel (dispatch overhead)
   kBenchMadThroughput,  // shaders/bench/mad_throughput.comp: float multiply-add throughput
+  kRenderSurfaceVert,      // shaders/render/surface.vert: camera pass, vertex pulling
+  kRenderSurfaceFrag,      // shaders/render/surface.frag: camera pass, per-fragment shading
+  kRenderVisibilityFrag,   // shaders/render/visibility.frag: triangle ids (distorted cameras)
+  kRenderShadowVert,       // shaders/render/shadow.vert: shadow-map pass, vertex pulling
+  kRenderShadowFrag,       // shaders/render/shadow.frag: shadow-map distances
+  kRenderDistortResolve,   // shaders/render/distort_resolve.comp: exact rays of distorted cameras
+  kRenderDownsample,       // shaders/render/downsample.comp: supersampling box filter
+  kRenderNormalMapShade,   // shaders/render/normal_map_shade.comp: normal-map captures
   kCount                // number of shaders; keep last
 };
 

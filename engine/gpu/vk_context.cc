@@ -140,13 +140,16 @@ StatusOr<InstanceResult> CreateInstance(bool want_validation) {
 
 // The queue family reflcap uses: compute-capable, preferring a compute-only family (asynchronous
 // compute on discrete GPUs) that has timestamps, then any compute family with timestamps, then
-// any compute family. -1 when there is none.
-int ChooseQueueFamily(const std::vector<VkQueueFamilyProperties>& families) {
+// any compute family. With `require_graphics`, only families that also support graphics count.
+// -1 when there is none.
+int ChooseQueueFamily(const std::vector<VkQueueFamilyProperties>& families,
+                      bool require_graphics = false) {
   int best = -1;
   int best_score = -1;
   for (size_t i = 0; i < families.size(); ++i) {
     const VkQueueFamilyProperties& f = families[i];
     if (!(f.queueFlags & VK_QUEUE_COMPUTE_BIT) || f.queueCount == 0) continue;
+    if (require_graphics && !(f.queueFlags & VK_QUEUE_GRAPHICS_BIT)) continue;
     const int score =
         (f.timestampValidBits > 0 ? 2 : 0) + ((f.queueFlags & VK_QUEUE_GRAPHICS_BIT) ? 0 : 1);
     if (score > best_score) {
@@ -327,7 +330,11 @@ StatusOr<std::unique_ptr<VkContext>> VkContext::Create(const ContextOptions& opt
   vkGetPhysicalDeviceMemoryProperties(ctx->physical_device_, &ctx->memory_properties_);
 
   const std::vector<VkQueueFamilyProperties> families = QueueFamilies(ctx->physical_device_);
-  const int family = ChooseQueueFamily(families);
+  const int family = ChooseQueueFamily(families, options.require_graphics);
+  if (family < 0 && options.require_graphics) {
+    return UnavailableError("Vulkan device ", ctx->info_.name,
+                            " has no queue family with both graphics and compute");
+  }
   REFLCAP_CHECK(family >= 0) << "a usable device has a compute queue";
   ctx->queue_family_ = static_cast<uint32_t>(family);
   ctx->info_.timestamp_valid_bits = families[family].timestampValidBits;

@@ -1,7 +1,8 @@
 #pragma once
 // VkContext: one headless Vulkan 1.2 instance, one physical device, one logical device with a
-// single compute queue and a command pool — what every reflcap compute path (the GPU fitter,
-// visibility masks, the Vulkan renderer) creates once and shares. No surface, no swapchain.
+// single compute queue (graphics + compute with ContextOptions::require_graphics, for the Vulkan
+// renderer) and a command pool — what every reflcap GPU path (the GPU fitter, visibility masks,
+// the Vulkan renderer) creates once and shares. No surface, no swapchain.
 // After uVkCompute's vulkan/driver.h + device.h, folded into one object.
 //
 // Device choice: ContextOptions::device (see SelectDevice in engine/gpu/device_info.h): a discrete
@@ -46,6 +47,10 @@ struct ContextOptions {
   // seconds (> 0). Real GPUs should finish each submit in well under a second; lavapipe runs on
   // the CPU and may take far longer for the same work.
   double submit_timeout_s = 60.0;
+  // Use a queue family that supports graphics as well as compute (the Vulkan renderer's
+  // rasterisation passes). Off: the compute-only family is preferred where there is one. On a
+  // device without such a family Create returns Unavailable.
+  bool require_graphics = false;
 
   Status Validate() const;
 };

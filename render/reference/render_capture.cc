@@ -124,9 +124,27 @@ StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t in
   return result;
 }
 
+CaptureRenderBackend CpuCaptureRenderBackend() {
+  CaptureRenderBackend b;
+  b.backend = "cpu";
+  b.device = "cpu";
+  b.renderer = "CPU reference renderer (render/reference): direct light, Embree shadow rays, "
+               "no interreflection";
+  b.render = RenderCaptureImage;
+  return b;
+}
+
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
                                              const fs::path& out_dir,
                                              const CaptureRenderOptions& options) {
+  return RenderCapture(capture, params_exr, out_dir, options, CpuCaptureRenderBackend());
+}
+
+StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
+                                             const fs::path& out_dir,
+                                             const CaptureRenderOptions& options,
+                                             const CaptureRenderBackend& backend) {
+  REFLCAP_CHECK(backend.render) << "CaptureRenderBackend::render is empty";
   const auto start = std::chrono::steady_clock::now();
   RenderOptions render_options;
   render_options.supersampling = options.supersampling;
@@ -155,6 +173,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                            LoadFittedCapture(capture, params_exr));
   summary.texels = fitted->atlas.TexelCount();
   summary.num_lobes = fitted->maps.num_lobes;
+  if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
   summary.load_s = SecondsSince(start);
   REFLCAP_LOG(kInfo) << "render: " << summary.texels << " texels ("
                      << (fitted->normal_map ? "normal map" : "mesh atlas") << " "
@@ -166,7 +185,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   for (size_t index : selected) {
     const CaptureImage& image = capture.images[index];
     const auto t0 = std::chrono::steady_clock::now();
-    REFLCAP_ASSIGN_OR_RETURN(RenderResult r, RenderCaptureImage(*fitted, index, render_options));
+    REFLCAP_ASSIGN_OR_RETURN(RenderResult r, backend.render(*fitted, index, render_options));
     const double render_s = SecondsSince(t0);
     summary.render_s += render_s;
     const auto t1 = std::chrono::steady_clock::now();
@@ -199,10 +218,9 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   summary.total_s = SecondsSince(start);
 
   Json report = {
-      {"backend", "cpu"},
-      {"device", "cpu"},
-      {"renderer", "CPU reference renderer (render/reference): direct light, Embree shadow rays, "
-                   "no interreflection"},
+      {"backend", backend.backend},
+      {"device", backend.device},
+      {"renderer", backend.renderer},
       {"capture", capture.json_path.string()},
       {"fit", params_exr.string()},
       {"split", SplitSelectionName(options.split)},

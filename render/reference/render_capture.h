@@ -17,6 +17,7 @@
 //   render_report.json       backend, device, capture, fit, split, options, atlas, per-image
 //                            files and seconds, timings
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -85,5 +86,26 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture,
                                              const std::filesystem::path& params_exr,
                                              const std::filesystem::path& out_dir,
                                              const CaptureRenderOptions& options);
+
+// What renders the photographs for RenderCapture below: another backend (the Vulkan renderer,
+// render/vulkan) plugs in here and gets the same file layout and report.
+struct CaptureRenderBackend {
+  std::string backend = "cpu";  // render_report.json "backend"
+  std::string device = "cpu";   // render_report.json "device" (the Vulkan device's name)
+  std::string renderer;         // render_report.json "renderer": one line on what it is
+  // Called once, after the capture and the fit are loaded and before the first render (e.g. to
+  // upload the scene); may be empty.
+  std::function<Status(const FittedCapture&)> prepare;
+  // Renders image `index` (as RenderCaptureImage does); called once per selected image.
+  std::function<StatusOr<RenderResult>(const FittedCapture&, size_t, const RenderOptions&)> render;
+};
+// The CPU reference renderer as a backend (what RenderCapture above uses).
+CaptureRenderBackend CpuCaptureRenderBackend();
+// RenderCapture with `backend` rendering each photograph.
+StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture,
+                                             const std::filesystem::path& params_exr,
+                                             const std::filesystem::path& out_dir,
+                                             const CaptureRenderOptions& options,
+                                             const CaptureRenderBackend& backend);
 
 }  // namespace reflcap::render

@@ -20,14 +20,16 @@ REFLCAP_CONST(int, kFitStatusConverged, 0);
 REFLCAP_CONST(int, kFitStatusMaxIterations, 1);
 // J^T J at the solution is rank deficient on the free parameters (a Cholesky pivot of its
 // unit-diagonal form < kLmSingularPivot), or kLmMaxSolveFailures damped factorisations in a row
-// failed: some parameter combination is not determined by the samples.
+// failed: some parameter combination is not determined by the samples. The texel then gets its
+// Lambert-only fit (the lobe's parameters are not trusted; engine/fit/problem.h).
 REFLCAP_CONST(int, kFitStatusSingular, 2);
 // Fewer valid samples than the model needs (FitOptions::min_samples, and always > parameters):
 // Lambert-only fit of what there is.
 REFLCAP_CONST(int, kFitStatusTooFewSamples, 3);
 // No valid sample within FitOptions::highlight_cone_deg of the mirror configuration: the seed's
 // mirror-lobe start has nothing to start from and no lobe can be told apart from the diffuse
-// term. Lambert-only fit.
+// term; or the fitted lobe rises above kMaxLobeSupremum x the brightest sample somewhere on the
+// hemisphere (extrapolation: engine/fit/problem.h). Lambert-only fit.
 REFLCAP_CONST(int, kFitStatusUnidentifiableLobe, 4);
 // The texel's samples held a NaN or Inf (value, weight or direction); those samples were dropped
 // and the rest fitted. This status replaces any other the fit of the rest would have had.

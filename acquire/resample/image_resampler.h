@@ -1,0 +1,169 @@
+#pragma once
+// ImageResampler: one photograph of a capture -> one outcome per texel and a BRDF sample for every
+// texel that passes all tests (CPU path; visibility and shadows by Embree through RayScene).
+//
+// It inverts the reference renderer (render/reference/reference_renderer.h): the photograph's
+// pixel is exposure_s * f(wi, wo) * E, so f = pixel / (exposure_s * E) with E = I cos θi / d²
+// (point light) or I cos θi (directional), cos θi taken at the texel's shading normal, and wi, wo
+// expressed in the texel's tangent frame exactly as the renderer builds it (atlas tangent
+// re-orthogonalised against the shading normal; bitangent = normal x tangent).
+//
+// Per texel, for a mesh capture, the tests run in this order and the first one that fails is the
+// outcome (Outcome below): the view is not grazing -> the texel projects inside the image (the
+// four bilinear taps around its projection, with lens distortion) -> the segment to the camera is
+// free (Embree occlusion ray from the texel, offset by RayScene::SurfaceOffset along the
+// geometric normal, to the camera centre, or along the view axis of an orthographic camera); the
+// texel is then "seen" -> the light is not grazing -> the segment to the light is free -> every
+// tap sees the texel's own, lit surface (the camera ray through the tap's pixel centre hits the
+// mesh within a depth tolerance of the texel, and that hit point is lit as the renderer decides
+// it: both normals face the light and its shadow ray is free) -> the pixel values are usable:
+// every tap finite (else kInvalid), no tap clipped, the interpolated value not negative beyond
+// the noise (else kInvalid) and above the noise floor.
+//
+// The tap tests read a per-image "pixel map" of what the camera ray through each pixel centre
+// sees (hit or background, depth, lit), filled lazily: a block casts the pixels its candidates'
+// taps need that no block has cast yet (Intersect16 and Occluded16 packets). Neighbouring texels
+// share taps, so this costs far fewer rays than four per candidate when texels are smaller than
+// pixels, and never more. Visibility and shadow rays of a block go out in 16-wide packets.
+//
+// Normal-map captures (no mesh) take the texel's own pixel as its projection, and every texel is
+// visible and unshadowed by construction (no occlusion, shadow or tap rays are cast).
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "acquire/resample/chunk_writer.h"
+#include "engine/capture/capture.h"
+#include "engine/core/status.h"
+#include "engine/image/image.h"
+#include "engine/mesh/ray_scene.h"
+#include "engine/mesh/texel_atlas.h"
+
+namespace reflcap::resample {
+
+// What became of one (texel, image) pair, in test order (the first failing test names it).
+enum class Outcome : uint8_t {
+  kKept = 0,
+  kGrazingView,   // n_s·v <= min_cos, or n_g·v <= 0 (geometric back face)
+  kEdgeOutside,   // a bilinear tap of non-zero weight lies outside the image, or the texel is
+                  // behind a pinhole camera
+  kOccluded,      // something lies on the segment from the texel to the camera
+  kGrazingLight,  // n_s·l <= min_cos, or n_g·l <= 0
+  kShadowed,      // something lies on the segment from the texel to the light
+  kEdgeSurface,   // a tap's camera ray misses the object or hits it off the texel's depth
+                  // (silhouette or depth discontinuity inside the pixel footprint)
+  kEdgeShadow,    // a tap's surface point is unlit (a shadow boundary inside the footprint)
+  kInvalid,       // a tap is NaN or Inf, or a channel is negative beyond the noise
+  kClipped,       // a tap reaches the image's saturation level in some channel
+  kDark,          // every channel at or below the noise floor
+};
+constexpr int kOutcomeCount = 11;
+const char* OutcomeName(Outcome outcome);
+
+// The camera sees the texel: the view is not grazing, it projects inside the image and nothing
+// occludes it (every outcome from kGrazingLight on, and kKept).
+inline bool Seen(Outcome o) { return o == Outcome::kKept || o >= Outcome::kGrazingLight; }
+// The photograph shows the texel lit: seen, the light is not grazing and nothing shadows it; only
+// the footprint and pixel tests remain (every outcome from kEdgeSurface on, and kKept). The count
+// of such observations per texel is what the rig offers; kept samples are what survives.
+inline bool Observed(Outcome o) { return o == Outcome::kKept || o >= Outcome::kEdgeSurface; }
+
+// The rejection reasons of resample_report.json: the six plus `invalid`.
+enum class Reason { kOccluded, kShadowed, kGrazing, kClipped, kDark, kEdge, kInvalid };
+constexpr int kReasonCount = 7;
+const char* ReasonName(Reason reason);
+// kGrazingView/kGrazingLight -> kGrazing; kEdgeOutside/kEdgeSurface/kEdgeShadow -> kEdge; ...
+// Must not be called with kKept.
+Reason ReasonOf(Outcome outcome);
+
+// Rejects a sample whose every channel is at or below kDarkSigmas read-noise standard deviations:
+// 3 sigma leaves a 0.1 % chance that pure read noise passes as signal. (With read_sigma = 0, a
+// noise-free capture, only pixels <= 0 are dark.)
+constexpr double kDarkSigmas = 3;
+// A channel below -kInvalidSigmas * read_sigma cannot be noise around a non-negative radiance
+// (probability < 3e-7): the pixel is corrupt. Within that band a negative channel is kept as
+// measured (clamping it would bias dark texels upwards).
+constexpr double kInvalidSigmas = 5;
+// The smallest relative standard deviation a pixel is credited with, whatever the noise model
+// says: half-float storage alone rounds to 2^-11 (4.9e-4) relative, and no photograph's
+// radiometric calibration is better than 0.1 %. It keeps weights finite for noise-free captures.
+constexpr double kRelativeSigmaFloor = 1e-3;
+// Edge test depth tolerance, in pixel footprints (the size of one pixel at the texel's depth),
+// applied as kEdgeDepthSlack * footprint * (1 + sqrt(2) tan θo): a plane seen at θo changes depth
+// by up to sqrt(2) * footprint * tan θo between the texel's projection and a tap centre (taps lie
+// within sqrt(2) pixels); the 1 absorbs curvature and tessellation inside the footprint; the
+// factor 2 keeps smooth, slanted surfaces from being rejected. A silhouette or an occluding
+// contour puts a tap on the background or on another surface, usually far beyond that.
+constexpr double kEdgeDepthSlack = 2;
+
+// Sensor noise of a capture's pixels (one channel, after nothing but the camera):
+// var(p) = photon_sigma_at_1² · max(p, 0) + read_sigma² + (kRelativeSigmaFloor · max_c p)².
+struct NoiseModel {
+  double photon_sigma_at_1 = 0;  // photon (shot) noise std at pixel value 1
+  double read_sigma = 0;         // signal-independent std
+  std::string source;            // where these numbers came from (for the report)
+
+  // Variance of one channel value p of a pixel whose largest channel is max_channel.
+  double PixelVariance(double p, double max_channel) const {
+    const double floor = kRelativeSigmaFloor * max_channel;
+    return photon_sigma_at_1 * photon_sigma_at_1 * (p > 0 ? p : 0) + read_sigma * read_sigma +
+           floor * floor;
+  }
+  double DarkFloor() const { return kDarkSigmas * read_sigma; }
+  double InvalidFloor() const { return -kInvalidSigmas * read_sigma; }
+};
+
+// What one photograph gave.
+struct ImageOutput {
+  std::vector<uint8_t> outcome;   // per texel: Outcome
+  std::vector<TexelSample> kept;  // one per kOutcome::kKept texel, ascending texel order
+  // Ray counts: camera rays of the pixel map, its shadow rays (hits facing the light),
+  // texel->camera occlusion rays, texel->light occlusion rays.
+  uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
+};
+
+class ImageResampler {
+ public:
+  // `scene` is the mesh's RayScene for mesh captures and nullptr for normal-map captures; the
+  // capture, atlas and scene must outlive the resampler. min_cos in [0, 1). threads: 0 = all.
+  // FailedPrecondition (naming capture.json and the field) for what the resampler cannot use: an
+  // orthographic camera without pixel_size_m for a mesh, a point light or a turntable angle in a
+  // normal-map capture.
+  static StatusOr<std::unique_ptr<ImageResampler>> Create(const Capture& capture,
+                                                          const TexelAtlas& atlas,
+                                                          const RayScene* scene,
+                                                          const NoiseModel& noise, double min_cos,
+                                                          int threads = 0);
+
+  // Resamples capture.images[image_index] whose pixels are `pixels` (3 channels, the camera's
+  // size; else InvalidArgument naming images[i].file). Samples carry image = image_index.
+  Status Process(uint32_t image_index, const Image& pixels, ImageOutput* out) const;
+
+  // True when a normal-map capture: no ray is cast.
+  bool normal_map() const { return scene_ == nullptr; }
+
+ private:
+  ImageResampler() = default;
+  struct Frame;
+  void ProcessMeshBlock(const Frame& frame, const Image& pixels, uint32_t image_index, int64_t begin,
+                        int64_t end, ImageOutput* out, std::vector<TexelSample>* kept,
+                        uint64_t* rays) const;
+  // Casts the camera ray (and, for a hit facing the light, the shadow ray) of every listed pixel
+  // (y * width + x) and publishes the results in the frame's pixel map.
+  void CastPixels(const Frame& frame, const std::vector<uint32_t>& pixels, uint64_t* rays) const;
+  void ProcessNormalMapBlock(const Frame& frame, const Image& pixels, uint32_t image_index,
+                             int64_t begin, int64_t end, ImageOutput* out,
+                             std::vector<TexelSample>* kept) const;
+
+  const Capture* capture_ = nullptr;
+  const TexelAtlas* atlas_ = nullptr;
+  const RayScene* scene_ = nullptr;
+  NoiseModel noise_;
+  float min_cos_ = 0;
+  int threads_ = 0;
+  std::vector<Vec3f> triangle_normals_;  // unit geometric normal per mesh triangle
+};
+
+}  // namespace reflcap::resample

@@ -1,0 +1,603 @@
+// ResampleCapture: capture -> sample store, report and coverage maps (see resample.h).
+#include "acquire/resample/resample.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <future>
+#include <map>
+#include <numeric>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "acquire/resample/chunk_writer.h"
+#include "acquire/resample/coverage.h"
+#include "acquire/resample/image_resampler.h"
+#include "engine/core/atomic_file.h"
+#include "engine/core/log.h"
+#include "engine/core/progress.h"
+#include "engine/image/exr_io.h"
+#include "engine/image/image_io.h"
+#include "engine/image/png_io.h"
+#include "engine/mesh/mesh_io.h"
+#include "engine/mesh/ray_scene.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/sample_store.h"
+
+namespace reflcap::resample {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Seconds(Clock::time_point since) {
+  return std::chrono::duration<double>(Clock::now() - since).count();
+}
+
+// Largest atlas side accepted (as `reflcap info`): 16384² texel slots.
+constexpr int kMaxAtlasResolution = 16384;
+// The sample-count thresholds reported as "fraction of seen texels with at least N samples".
+constexpr int kSampleThresholds[] = {1, 5, 10, 20, 50};
+// Half-vector angles (degrees) below which a texel counts as having seen a near-specular
+// configuration: 2° resolves lobes up to n ~ 200, 5° up to n ~ 30, 10° only broad ones
+// (a lobe of exponent n is ~ 1/sqrt(n) rad wide around the mirror direction, θh half that).
+constexpr double kNearSpecularDeg[] = {2, 5, 10};
+// Near-specular threshold used in the per-views table.
+constexpr double kNearSpecularTableDeg = 5;
+
+// Nearest-rank percentile of an ascending vector (q in [0, 1]); 0 when empty.
+double Percentile(const std::vector<double>& sorted, double q) {
+  if (sorted.empty()) return 0;
+  const size_t rank = size_t(std::ceil(q * double(sorted.size())));
+  return sorted[std::min(sorted.size() - 1, rank == 0 ? 0 : rank - 1)];
+}
+
+Json Distribution(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  const double sum = std::accumulate(values.begin(), values.end(), 0.0);
+  return {{"p5", Percentile(values, 0.05)},
+          {"p50", Percentile(values, 0.50)},
+          {"p95", Percentile(values, 0.95)},
+          {"mean", values.empty() ? 0.0 : sum / double(values.size())},
+          {"max", values.empty() ? 0.0 : values.back()}};
+}
+
+struct NoiseChoice {
+  NoiseModel model;
+  double saturation = 0;  // ground_truth.noise.saturation, 0 when absent
+};
+
+StatusOr<NoiseChoice> ChooseNoiseModel(const Capture& capture, const ResampleOptions& options) {
+  NoiseChoice choice;
+  NoiseModel& m = choice.model;
+  m.photon_sigma_at_1 = kDefaultPhotonSigma;
+  m.read_sigma = kDefaultReadSigma;
+  m.source = "default (the capture records no noise model)";
+  if (!capture.ground_truth_json.empty()) {
+    const Json truth = Json::parse(capture.ground_truth_json, nullptr, false);
+    if (truth.is_object() && truth.contains("noise") && truth["noise"].is_object()) {
+      const Json& noise = truth["noise"];
+      auto number = [&](const char* key, double* out) -> Status {
+        if (!noise.contains(key)) return OkStatus();
+        if (!noise[key].is_number() || !(noise[key].get<double>() >= 0) ||
+            !std::isfinite(noise[key].get<double>())) {
+          return InvalidArgumentError(capture.json_path.string(), ": ground_truth.noise.", key,
+                                      ": must be a finite number >= 0");
+        }
+        *out = noise[key].get<double>();
+        return OkStatus();
+      };
+      if (noise.contains("photon_sigma_at_1") || noise.contains("read_sigma")) {
+        REFLCAP_RETURN_IF_ERROR(number("photon_sigma_at_1", &m.photon_sigma_at_1));
+        REFLCAP_RETURN_IF_ERROR(number("read_sigma", &m.read_sigma));
+        m.source = "capture ground_truth.noise";
+      }
+      REFLCAP_RETURN_IF_ERROR(number("saturation", &choice.saturation));
+    }
+  }
+  if (options.photon_sigma || options.read_sigma) {
+    if (options.photon_sigma) m.photon_sigma_at_1 = *options.photon_sigma;
+    if (options.read_sigma) m.read_sigma = *options.read_sigma;
+    m.source = "command line (--noise-sigma / --read-sigma), rest " + m.source;
+  }
+  return choice;
+}
+
+// The atlas size of a mesh capture (see ResampleOptions::atlas_resolution).
+void AtlasSize(const Capture& capture, int requested, int* width, int* height, std::string* why) {
+  if (requested > 0) {
+    *width = *height = requested;
+    *why = "--atlas-res";
+    return;
+  }
+  if (!capture.ground_truth_json.empty()) {
+    const Json truth = Json::parse(capture.ground_truth_json, nullptr, false);
+    if (truth.is_object() && truth.contains("atlas") && truth["atlas"].is_object()) {
+      const Json& a = truth["atlas"];
+      if (a.contains("width") && a["width"].is_number_integer()) {
+        const int w = a["width"].get<int>();
+        const int h = a.contains("height") && a["height"].is_number_integer() ? a["height"].get<int>() : w;
+        if (w >= 1 && h >= 1 && w <= kMaxAtlasResolution && h <= kMaxAtlasResolution) {
+          *width = w;
+          *height = h;
+          *why = "capture ground_truth.atlas";
+          return;
+        }
+      }
+    }
+  }
+  *width = *height = kDefaultAtlasResolution;
+  *why = "default";
+}
+
+bool Selected(const CaptureImage& image, SplitSelection split) {
+  switch (split) {
+    case SplitSelection::kTrain: return image.split == Split::kTrain;
+    case SplitSelection::kHoldout: return image.split == Split::kHoldout;
+    case SplitSelection::kAll: return true;
+  }
+  return false;
+}
+
+Image CoveragePng(const TexelAtlas& atlas, const TexelCoverage& coverage) {
+  Image png(atlas.width, atlas.height, 3, 0.0f);
+  const double scale = 1.0 / std::log2(1 + kCoveragePngFullScale);
+  for (size_t t = 0; t < atlas.TexelCount(); ++t) {
+    float* px = &png.data[size_t(atlas.pixel_of_texel[t]) * 3];
+    const uint32_t n = coverage.samples(t);
+    if (n == 0) {
+      px[0] = 160.0f / 255.0f;
+      continue;
+    }
+    const float grey = float(std::min(1.0, std::log2(1.0 + n) * scale));
+    px[0] = px[1] = px[2] = grey;
+  }
+  return png;
+}
+
+}  // namespace
+
+StatusOr<Backend> ParseBackend(const std::string& name) {
+  if (name == "cpu") return Backend::kCpu;
+  if (name == "vulkan") return Backend::kVulkan;
+  return InvalidArgumentError("--backend: \"", name, "\" is not a backend (cpu, vulkan)");
+}
+
+StatusOr<SplitSelection> ParseSplit(const std::string& name) {
+  if (name == "train") return SplitSelection::kTrain;
+  if (name == "holdout") return SplitSelection::kHoldout;
+  if (name == "all") return SplitSelection::kAll;
+  return InvalidArgumentError("--split: \"", name, "\" is not a split (train, holdout, all)");
+}
+
+const char* SplitSelectionName(SplitSelection split) {
+  switch (split) {
+    case SplitSelection::kTrain: return "train";
+    case SplitSelection::kHoldout: return "holdout";
+    case SplitSelection::kAll: return "all";
+  }
+  return "?";
+}
+
+Status BackendAvailable(Backend backend) {
+  if (backend == Backend::kVulkan) {
+    return UnavailableError("--backend vulkan: the Vulkan resampler is not available yet (it "
+                            "comes with the Vulkan issue); use --backend cpu");
+  }
+  return OkStatus();
+}
+
+Status ResampleOptions::Validate() const {
+  if (atlas_resolution < 0 || atlas_resolution > kMaxAtlasResolution) {
+    return InvalidArgumentError("--atlas-res: must be in [1, ", kMaxAtlasResolution, "], got ",
+                                atlas_resolution);
+  }
+  if (!(min_cos >= 0 && min_cos < 1)) {
+    return InvalidArgumentError("--min-cos: must be in [0, 1), got ", min_cos);
+  }
+  if (photon_sigma && !(*photon_sigma >= 0 && *photon_sigma <= 1)) {
+    return InvalidArgumentError("--noise-sigma: must be in [0, 1], got ", *photon_sigma);
+  }
+  if (read_sigma && !(*read_sigma >= 0 && *read_sigma <= 1)) {
+    return InvalidArgumentError("--read-sigma: must be in [0, 1], got ", *read_sigma);
+  }
+  if (chunk_texels == 0) return InvalidArgumentError("chunk_texels must be >= 1");
+  if (threads < 0) return InvalidArgumentError("threads must be >= 0");
+  return OkStatus();
+}
+
+StatusOr<ResampleSummary> ResampleCapture(const fs::path& capture_path,
+                                          const ResampleOptions& options, const fs::path& out_dir) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend));
+  REFLCAP_ASSIGN_OR_RETURN(Capture capture, ReadCapture(capture_path));
+  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, nullptr));
+  return ResampleCapture(capture, options, out_dir);
+}
+
+StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const ResampleOptions& options,
+                                          const fs::path& out_dir) {
+  const auto start = Clock::now();
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend));
+  const std::string file = original.json_path.string();
+  REFLCAP_ASSIGN_OR_RETURN(NoiseChoice noise, ChooseNoiseModel(original, options));
+  // An image without its own saturation level clips at the capture's ground_truth.noise one.
+  Capture capture = original;
+  for (CaptureImage& image : capture.images) {
+    if (image.saturation == 0) image.saturation = noise.saturation;
+  }
+
+  // ---- Geometry -------------------------------------------------------------------------------
+  TexelAtlas atlas;
+  std::unique_ptr<RayScene> scene;
+  std::string atlas_source;
+  const bool normal_map = capture.normal_map.has_value();
+  if (!normal_map) {
+    auto mesh = LoadMesh(capture.Resolve(capture.mesh));
+    if (!mesh.ok()) return Status(mesh.status().code(), StrCat(file, ": mesh: ", mesh.status().message()));
+    int w, h;
+    AtlasSize(capture, options.atlas_resolution, &w, &h, &atlas_source);
+    REFLCAP_ASSIGN_OR_RETURN(atlas, BuildTexelAtlas(*mesh, w, h));
+    REFLCAP_ASSIGN_OR_RETURN(scene, RayScene::Create(*mesh));
+  } else {
+    if (options.atlas_resolution > 0) {
+      REFLCAP_LOG(kWarning) << "--atlas-res is ignored: the texels of a normal-map capture are its "
+                               "camera's masked pixels";
+    }
+    const NormalMapGeometry& g = *capture.normal_map;
+    auto normals = ReadExrRgb(capture.Resolve(g.normals));
+    if (!normals.ok()) {
+      return Status(normals.status().code(), StrCat(file, ": normal_map.normals: ", normals.status().message()));
+    }
+    auto mask = ReadPng(capture.Resolve(g.mask));
+    if (!mask.ok()) {
+      return Status(mask.status().code(), StrCat(file, ": normal_map.mask: ", mask.status().message()));
+    }
+    auto built = BuildNormalMapAtlas(*normals, *mask);
+    if (!built.ok()) {
+      return Status(built.status().code(), StrCat(file, ": normal_map: ", built.status().message()));
+    }
+    atlas = std::move(*built);
+    atlas_source = "normal map (the camera's masked pixels)";
+  }
+  const size_t texels = atlas.TexelCount();
+  if (texels == 0) return FailedPreconditionError(file, ": the atlas has no texels");
+  if (texels > std::numeric_limits<uint32_t>::max()) {
+    return FailedPreconditionError(file, ": ", texels, " texels exceed the sample store's 2^32");
+  }
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<ImageResampler> resampler,
+                           ImageResampler::Create(capture, atlas, scene.get(), noise.model,
+                                                  options.min_cos, options.threads));
+
+  // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
+  std::map<std::pair<int, double>, int> view_ids;
+  std::vector<std::pair<int, uint32_t>> order;  // (view, image index)
+  size_t skipped = 0;
+  for (size_t i = 0; i < capture.images.size(); ++i) {
+    const CaptureImage& image = capture.images[i];
+    if (!Selected(image, options.split)) continue;
+    if (normal_map && image.camera != capture.normal_map->camera) {
+      ++skipped;
+      continue;
+    }
+    auto [it, inserted] = view_ids.try_emplace({image.camera, image.turntable_deg}, int(view_ids.size()));
+    order.push_back({it->second, uint32_t(i)});
+  }
+  if (skipped > 0) {
+    REFLCAP_LOG(kWarning) << skipped << " selected images are not from the normal map's camera "
+                          << "and were skipped";
+  }
+  if (order.empty()) {
+    return FailedPreconditionError(file, ": images: no image in split \"",
+                                   SplitSelectionName(options.split), "\"",
+                                   skipped ? " from the normal map's camera" : "");
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  const double setup_s = Seconds(start);
+
+  // ---- Resample, streaming into chunks ------------------------------------------------------
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<ChunkedSampleWriter> writer,
+                           ChunkedSampleWriter::Create(out_dir / ".spill", uint32_t(texels),
+                                                       options.chunk_texels,
+                                                       options.spill_buffer_bytes));
+  TexelCoverage coverage(texels);
+  std::array<uint64_t, kOutcomeCount> outcome_counts{};
+  uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
+  double read_wait_s = 0, resample_s = 0, stream_s = 0;
+  auto read_image = [&capture](uint32_t index) {
+    const fs::path path = capture.Resolve(capture.images[index].file);
+    return std::async(std::launch::async, [path] { return ReadImageRgb(path); });
+  };
+  Progress progress("resample", int64_t(order.size()));
+  std::future<StatusOr<Image>> next = read_image(order[0].second);
+  ImageOutput output;
+  for (size_t k = 0; k < order.size(); ++k) {
+    const uint32_t index = order[k].second;
+    auto t0 = Clock::now();
+    StatusOr<Image> pixels = next.get();
+    read_wait_s += Seconds(t0);
+    if (k + 1 < order.size()) next = read_image(order[k + 1].second);
+    if (!pixels.ok()) {
+      return Status(pixels.status().code(),
+                    StrCat(file, ": images[", index, "].file: ", pixels.status().message()));
+    }
+    t0 = Clock::now();
+    REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output));
+    resample_s += Seconds(t0);
+    t0 = Clock::now();
+    for (uint8_t o : output.outcome) ++outcome_counts[o];
+    primary_rays += output.primary_rays;
+    tap_shadow_rays += output.tap_shadow_rays;
+    visibility_rays += output.visibility_rays;
+    shadow_rays += output.shadow_rays;
+    coverage.AddImage(output.outcome, output.kept, order[k].first, options.threads);
+    REFLCAP_RETURN_IF_ERROR(writer->Append(output.kept.data(), output.kept.size()));
+    stream_s += Seconds(t0);
+    progress.Advance();
+  }
+  progress.Finish();
+  output = ImageOutput();
+
+  auto t0 = Clock::now();
+  const uint64_t spilled_bytes = writer->spilled_bytes();
+  REFLCAP_RETURN_IF_ERROR(writer->Finish(out_dir, options.threads));
+  const double reorder_s = Seconds(t0);
+
+  // ---- Store, maps, report ----------------------------------------------------------------------
+  t0 = Clock::now();
+  SampleStoreInfo info;
+  info.texels = uint32_t(texels);
+  info.chunk_texels = options.chunk_texels;
+  info.chunks = writer->chunks();
+  info.samples = writer->samples();
+  info.atlas_width = atlas.width;
+  info.atlas_height = atlas.height;
+  info.pixel_of_texel = atlas.pixel_of_texel;
+  std::error_code ec;
+  const fs::path absolute_capture = fs::absolute(capture.json_path, ec);
+  info.capture = (ec ? capture.json_path : absolute_capture.lexically_normal()).string();
+  info.split = SplitSelectionName(options.split);
+  info.min_cos = options.min_cos;
+  info.images = uint32_t(order.size());
+  info.geometry = normal_map ? "normal_map" : "mesh";
+  REFLCAP_RETURN_IF_ERROR(WriteSampleStoreInfo(out_dir, info));
+
+  Image samples_map(atlas.width, atlas.height, 1, 0.0f);
+  // domain.exr channels, in OpenEXR's (alphabetical) order.
+  const std::vector<std::string> domain_names = {"cells", "min_half_angle_deg", "observations",
+                                                 "samples", "seen", "views"};
+  Image domain_map(atlas.width, atlas.height, int(domain_names.size()), 0.0f);
+  std::vector<double> samples_seen, cells_seen, views_seen, observations_seen;
+  uint64_t texels_seen = 0, texels_with_samples = 0, texels_observed = 0, observations = 0;
+  std::array<uint64_t, std::size(kSampleThresholds)> at_least{}, observed_at_least{},
+      observed_and_kept{};
+  std::array<uint64_t, std::size(kNearSpecularDeg)> near_specular{};
+  // Texels grouped by their number of views: 0, 1, 2, 3-4, 5-8, 9-16, 17+.
+  constexpr int kViewGroups = 7;
+  const char* kViewGroupNames[kViewGroups] = {"0", "1", "2", "3-4", "5-8", "9-16", "17+"};
+  auto view_group = [](uint32_t v) {
+    if (v <= 2) return int(v);
+    if (v <= 4) return 3;
+    if (v <= 8) return 4;
+    if (v <= 16) return 5;
+    return 6;
+  };
+  struct Group {
+    uint64_t texels = 0;
+    double samples = 0, cells = 0;
+    uint64_t near_specular = 0;
+  };
+  std::array<Group, kViewGroups> groups{};
+  for (size_t t = 0; t < texels; ++t) {
+    const size_t pixel = atlas.pixel_of_texel[t];
+    const uint32_t n = coverage.samples(t);
+    samples_map.data[pixel] = float(n);
+    float* d = &domain_map.data[pixel * domain_names.size()];
+    const uint32_t o = coverage.observations(t);
+    d[0] = float(coverage.cells(t));
+    d[1] = coverage.min_half_angle_deg(t);
+    d[2] = float(o);
+    d[3] = float(n);
+    d[4] = coverage.seen(t) ? 1.0f : 0.0f;
+    d[5] = float(coverage.views(t));
+    texels_with_samples += n > 0;
+    texels_observed += o > 0;
+    observations += o;
+    if (!coverage.seen(t)) continue;
+    ++texels_seen;
+    samples_seen.push_back(n);
+    observations_seen.push_back(o);
+    cells_seen.push_back(coverage.cells(t));
+    views_seen.push_back(coverage.views(t));
+    for (size_t i = 0; i < std::size(kSampleThresholds); ++i) {
+      const uint32_t threshold = uint32_t(kSampleThresholds[i]);
+      at_least[i] += n >= threshold;
+      observed_at_least[i] += o >= threshold;
+      observed_and_kept[i] += o >= threshold && n >= threshold;
+    }
+    for (size_t i = 0; i < std::size(kNearSpecularDeg); ++i) {
+      near_specular[i] += coverage.min_half_angle_deg(t) < kNearSpecularDeg[i];
+    }
+    Group& g = groups[view_group(coverage.views(t))];
+    ++g.texels;
+    g.samples += n;
+    g.cells += coverage.cells(t);
+    g.near_specular += coverage.min_half_angle_deg(t) < kNearSpecularTableDeg;
+  }
+  REFLCAP_RETURN_IF_ERROR(WriteExr(out_dir / "coverage.exr", samples_map));
+  REFLCAP_RETURN_IF_ERROR(WriteExrChannels(out_dir / "domain.exr", domain_map, domain_names));
+  REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "coverage.png", CoveragePng(atlas, coverage)));
+
+  uint64_t kept = outcome_counts[size_t(Outcome::kKept)];
+  std::array<uint64_t, kReasonCount> reasons{};
+  Json detail = Json::object();
+  for (int o = 1; o < kOutcomeCount; ++o) {
+    reasons[size_t(ReasonOf(Outcome(o)))] += outcome_counts[o];
+    detail[OutcomeName(Outcome(o))] = outcome_counts[o];
+  }
+  Json rejected = Json::object();
+  uint64_t rejected_total = 0;
+  for (int r = 0; r < kReasonCount; ++r) {
+    rejected[ReasonName(Reason(r))] = reasons[r];
+    rejected_total += reasons[r];
+  }
+  REFLCAP_CHECK(kept == writer->samples()) << kept << " kept vs " << writer->samples() << " written";
+  const double fraction_base = texels_seen > 0 ? double(texels_seen) : 1.0;
+  Json at_least_json = Json::object(), observed_json = Json::object(), keep_json = Json::object();
+  for (size_t i = 0; i < std::size(kSampleThresholds); ++i) {
+    const std::string key = std::to_string(kSampleThresholds[i]);
+    at_least_json[key] = double(at_least[i]) / fraction_base;
+    observed_json[key] = double(observed_at_least[i]) / fraction_base;
+    keep_json[key] = {{"texels_observed_at_least", observed_at_least[i]},
+                      {"fraction_keeping_at_least",
+                       observed_at_least[i] ? double(observed_and_kept[i]) / double(observed_at_least[i]) : 0.0}};
+  }
+  Json near_json = Json::object();
+  for (size_t i = 0; i < std::size(kNearSpecularDeg); ++i) {
+    near_json[StrCat(kNearSpecularDeg[i])] = double(near_specular[i]) / fraction_base;
+  }
+  Json by_views = Json::array();
+  for (int g = 0; g < kViewGroups; ++g) {
+    const Group& group = groups[g];
+    const double n = group.texels > 0 ? double(group.texels) : 1.0;
+    by_views.push_back({{"views", kViewGroupNames[g]},
+                        {"texels", group.texels},
+                        {"mean_samples", group.samples / n},
+                        {"mean_cells", group.cells / n},
+                        {"mean_cells_fraction", group.cells / n / kDomainCells},
+                        {"near_specular_5deg_fraction", double(group.near_specular) / n}});
+  }
+  const uint64_t pairs = uint64_t(texels) * order.size();
+  const double total_s = Seconds(start);
+  Json report = {
+      {"format", "reflcap-resample-report/1"},
+      {"capture", info.capture},
+      {"backend", "cpu"},
+      {"split", info.split},
+      {"geometry", info.geometry},
+      {"visibility", normal_map
+                         ? "not tested: a normal-map capture has no mesh, so every texel counts as "
+                           "visible and unshadowed (no occlusion, shadow or footprint rays)"
+                         : "Embree occlusion rays texel->camera and texel->light; footprint: the "
+                           "camera ray through each bilinear tap must hit the texel's lit surface"},
+      {"min_cos", options.min_cos},
+      {"noise_model", {{"photon_sigma_at_1", noise.model.photon_sigma_at_1},
+                       {"read_sigma", noise.model.read_sigma},
+                       {"relative_sigma_floor", kRelativeSigmaFloor},
+                       {"dark_floor", noise.model.DarkFloor()},
+                       {"invalid_below", noise.model.InvalidFloor()},
+                       {"source", noise.model.source}}},
+      {"atlas", {{"width", atlas.width}, {"height", atlas.height}, {"source", atlas_source}}},
+      {"images", order.size()},
+      {"images_skipped", skipped},
+      {"views", view_ids.size()},
+      {"texels", texels},
+      {"texels_seen", texels_seen},
+      {"texels_with_samples", texels_with_samples},
+      {"pairs", pairs},
+      {"samples_kept", kept},
+      {"samples_rejected", rejected},
+      {"samples_rejected_total", rejected_total},
+      {"samples_rejected_detail", detail},
+      {"reason_order",
+       "each (texel, image) pair is counted once, under the first test it fails: grazing (view) > "
+       "edge (outside the image) > occluded > grazing (light) > shadowed > edge (footprint: "
+       "silhouette, depth or shadow boundary) > invalid > clipped > dark; kept + rejected = pairs"},
+      {"samples_per_texel", Distribution(samples_seen)},
+      {"samples_per_texel_population", "texels_seen (texels some selected camera sees: view not "
+                                       "grazing, inside the image, not occluded)"},
+      {"texels_seen_with_at_least_samples", at_least_json},
+      {"texels_observed", texels_observed},
+      {"observations", observations},
+      {"observations_kept_fraction", observations ? double(kept) / double(observations) : 0.0},
+      {"observations_definition",
+       "an observation is a (texel, image) pair that the photograph shows lit: seen, light not "
+       "grazing, not shadowed; only the footprint (edge) and pixel tests remain. Observations are "
+       "what the rig offers; samples are what the resampler keeps"},
+      {"observations_per_texel", Distribution(observations_seen)},
+      {"texels_seen_with_at_least_observations", observed_json},
+      {"keep_rate_by_threshold", keep_json},
+      {"domain",
+       {{"cells_total", kDomainCells},
+        {"binning", "unordered (theta_i, theta_o) pair in 15 deg bins over [0, 90) x relative "
+                    "azimuth in 30 deg bins over [0, 180]: 21 x 6 cells (reciprocity, isotropy)"},
+        {"cells_per_texel", Distribution(cells_seen)},
+        {"views_per_texel", Distribution(views_seen)},
+        {"near_specular_fraction", near_json},
+        {"near_specular_definition", "fraction of seen texels with a sample whose half vector is "
+                                     "within the given angle (deg) of the shading normal"},
+        {"by_views", by_views},
+        {"note", "more viewpoints give more distinct cells and more near-specular samples, which "
+                 "is what makes a lobe identifiable (the seed paper: more viewpoints, more "
+                 "accurate fits)"}}},
+      {"rays", {{"visibility", visibility_rays},
+                {"shadow", shadow_rays},
+                {"pixel_map_camera", primary_rays},
+                {"pixel_map_shadow", tap_shadow_rays}}},
+      {"timings", {{"setup_s", setup_s},
+                   {"read_wait_s", read_wait_s},
+                   {"resample_s", resample_s},
+                   {"stream_s", stream_s},
+                   {"reorder_s", reorder_s},
+                   {"outputs_s", Seconds(t0)},
+                   {"total_s", total_s},
+                   {"texel_image_pairs_per_s", resample_s > 0 ? double(pairs) / resample_s : 0.0}}},
+      {"store", {{"chunks", info.chunks},
+                 {"chunk_texels", info.chunk_texels},
+                 {"spilled_bytes", spilled_bytes}}},
+      {"files", {{"coverage.exr", "samples per texel (Y), atlas layout"},
+                 {"coverage.png", "log2(1 + samples) / log2(256) as grey (255 at >= 255 samples); "
+                                  "dark red: texel without samples; black: no texel"},
+                 {"domain.exr", "per texel: cells (distinct domain cells of 126), "
+                                "min_half_angle_deg (90 without samples), observations (images "
+                                "showing it lit), samples, seen (0/1), views (distinct camera x "
+                                "turntable poses with a sample)"}}}};
+  const std::string report_text = report.dump(2) + "\n";
+  REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "resample_report.json", report_text));
+
+  ResampleSummary summary;
+  summary.texels = texels;
+  summary.texels_seen = texels_seen;
+  summary.texels_with_samples = texels_with_samples;
+  summary.images = order.size();
+  summary.samples_kept = kept;
+  summary.samples_rejected = rejected_total;
+  summary.seconds = Seconds(start);
+  summary.report_json = report_text;
+  std::ostringstream text;
+  char line[256];
+  std::snprintf(line, sizeof line, "resampled %zu images x %zu texels (%s split, %s) in %s\n",
+                order.size(), texels, info.split.c_str(), info.geometry.c_str(),
+                FormatDuration(summary.seconds).c_str());
+  text << line;
+  std::snprintf(line, sizeof line, "  samples kept %llu (%.1f %% of %llu texel-image pairs); rejected:",
+                (unsigned long long)kept, pairs ? 100.0 * double(kept) / double(pairs) : 0.0,
+                (unsigned long long)pairs);
+  text << line;
+  for (int r = 0; r < kReasonCount; ++r) text << " " << ReasonName(Reason(r)) << " " << reasons[r];
+  text << "\n";
+  const Json& spt = report["samples_per_texel"];
+  std::snprintf(line, sizeof line,
+                "  texels seen %llu, with samples %llu; samples per seen texel p5 %.0f, p50 %.0f, "
+                "p95 %.0f; >= 20 samples: %.1f %% (>= 20 lit observations: %.1f %%)\n",
+                (unsigned long long)texels_seen, (unsigned long long)texels_with_samples,
+                spt["p5"].get<double>(), spt["p50"].get<double>(), spt["p95"].get<double>(),
+                100.0 * at_least_json["20"].get<double>(), 100.0 * observed_json["20"].get<double>());
+  text << line;
+  const Json& domain = report["domain"];
+  std::snprintf(line, sizeof line,
+                "  coverage: %.0f views and %.0f of %d domain cells per seen texel (median); "
+                "near-specular sample (half vector < 5 deg): %.1f %% of seen texels\n",
+                domain["views_per_texel"]["p50"].get<double>(),
+                domain["cells_per_texel"]["p50"].get<double>(), kDomainCells,
+                100.0 * near_json["5"].get<double>());
+  text << line;
+  summary.text = text.str();
+  return summary;
+}
+
+}  // namespace reflcap::resample

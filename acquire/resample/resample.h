@@ -1,0 +1,113 @@
+#pragma once
+// Resampling, the seed paper's step 3.4.3 (Fukuda et al.): every selected photograph of a capture
+// is projected onto the texels of the object's atlas, light and view directions are expressed in
+// each texel's tangent frame, and the BRDF samples are reorganised texel-major into a sample
+// store (engine/texel/sample_store.h) so a fitter reads each texel's data once, in one place.
+//
+// ResampleCapture reads the capture, builds the atlas (and the Embree scene of a mesh), runs
+// ImageResampler on one photograph at a time (the next one is read while the current one is
+// resampled), streams the kept samples through ChunkedSampleWriter, and writes the store, the
+// report and the coverage maps:
+//
+//   store.json, atlas.bin, chunk_NNNNN.rcs   the sample store
+//   resample_report.json                     counts, reasons, percentiles, coverage, timings
+//   coverage.exr                             samples per texel (channel Y), atlas layout
+//   coverage.png                             the same, tone-mapped (see kCoveragePngFullScale)
+//   domain.exr                               per texel: views, domain cells, min half-vector angle
+//
+// Acceptance of a (texel, image) pair, the rejection reasons and their order: image_resampler.h.
+// BRDF value = pixel / (exposure_s · E) per channel, weight = 1 / var(value) from the noise model
+// (NoiseModel): ground_truth.noise of a synthetic capture, else kDefaultPhotonSigma /
+// kDefaultReadSigma, either overridden by the options. A pixel clips at images[].saturation, or
+// at ground_truth.noise.saturation for an image that has none.
+//
+// Memory stays bounded whatever the number of images: one photograph (plus the one being read),
+// the atlas, the scene, per-texel counters, and the writer's buffer budget (the 1,008,600-texel
+// synthetic preset, 180 or 288 images of 1024², peaks near 0.6 GB).
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "engine/capture/capture.h"
+#include "engine/core/status.h"
+
+namespace reflcap::resample {
+
+enum class Backend { kCpu, kVulkan };
+enum class SplitSelection { kTrain, kHoldout, kAll };
+
+// "cpu" / "vulkan"; InvalidArgument otherwise.
+StatusOr<Backend> ParseBackend(const std::string& name);
+// "train" / "holdout" / "all"; InvalidArgument otherwise.
+StatusOr<SplitSelection> ParseSplit(const std::string& name);
+const char* SplitSelectionName(SplitSelection split);
+// OK for kCpu; Unavailable for kVulkan until the Vulkan resampler lands.
+Status BackendAvailable(Backend backend);
+
+// cos 81.4°. Below it a sample carries more geometric error than reflectance: a 1° error in the
+// normal changes cos θ by tan θ · 1.7 % = 11 % of itself, and a pixel's footprint on the surface
+// is stretched 1/cos θ = 6.7-fold, so it averages radiance over several texels. The seed paper's
+// samples near grazing were its least reliable; 0.15 keeps 81° of the 90° range.
+constexpr double kDefaultMinCos = 0.15;
+// Texels per chunk file: 16384 texels of ~50 samples are ~40 MB, a convenient unit to read,
+// fit and free; a 1,000,000-texel atlas makes 62 files.
+constexpr uint32_t kDefaultChunkTexels = 16384;
+// Memory budget of the reorder buffers (all chunks together) before they spill to disk.
+constexpr size_t kDefaultSpillBufferBytes = size_t(128) << 20;
+// Noise model of a capture that records none (no ground_truth.noise; see NoiseModel): photon
+// noise of 1 % at pixel value 1 and read noise of 1e-3, i.e. a photon-dominated sensor whose
+// well-exposed pixels are ~0.1-1, and a dark floor of 3e-3 (kDarkSigmas read sigmas). Override
+// with --noise-sigma / --read-sigma.
+constexpr double kDefaultPhotonSigma = 0.01;
+constexpr double kDefaultReadSigma = 1e-3;
+// coverage.png: grey = 255 · log2(1 + n) / log2(1 + kCoveragePngFullScale) for n >= 1 samples
+// (1 -> 32, 20 -> 140, >= 255 -> 255); texels with no sample are dark red (160, 0, 0); pixels
+// that are not texels are black.
+constexpr double kCoveragePngFullScale = 255;
+
+struct ResampleOptions {
+  // Atlas resolution R (R x R) of a mesh capture; 0 = the capture's ground_truth.atlas size when
+  // it has one (synthetic captures), else kDefaultAtlasResolution (512). Range [0, 16384].
+  // Normal-map captures ignore it (their texels are the camera's masked pixels).
+  int atlas_resolution = 0;
+  SplitSelection split = SplitSelection::kTrain;
+  // Both n·l and n·v (shading normal) must exceed it. Range [0, 1).
+  double min_cos = kDefaultMinCos;
+  Backend backend = Backend::kCpu;
+  // Noise model overrides, each in [0, 1]; unset = from the capture's ground_truth.noise, else
+  // kDefaultPhotonSigma / kDefaultReadSigma.
+  std::optional<double> photon_sigma;
+  std::optional<double> read_sigma;
+  uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
+  size_t spill_buffer_bytes = kDefaultSpillBufferBytes;
+  int threads = 0;  // 0 = all cores
+
+  Status Validate() const;  // InvalidArgument naming the option
+};
+
+// What a run did (also written as resample_report.json).
+struct ResampleSummary {
+  uint64_t texels = 0;
+  uint64_t texels_seen = 0;
+  uint64_t texels_with_samples = 0;
+  uint64_t images = 0;
+  uint64_t samples_kept = 0;
+  uint64_t samples_rejected = 0;
+  double seconds = 0;
+  std::string report_json;  // the report's text
+  std::string text;         // a few lines for people: counts, reasons, coverage, where the files are
+};
+
+// Resamples the capture at `capture_path` (capture.json or its folder) into `out_dir`, which
+// must exist (the caller stages it: nothing is written anywhere else). Errors: those of
+// ReadCapture/ValidateCaptureFiles and of reading images (naming capture.json and the field),
+// Unavailable for Backend::kVulkan, InvalidArgument for bad options.
+StatusOr<ResampleSummary> ResampleCapture(const std::filesystem::path& capture_path,
+                                          const ResampleOptions& options,
+                                          const std::filesystem::path& out_dir);
+// The same for a capture already read and checked with ReadCapture and ValidateCaptureFiles.
+StatusOr<ResampleSummary> ResampleCapture(const Capture& capture, const ResampleOptions& options,
+                                          const std::filesystem::path& out_dir);
+
+}  // namespace reflcap::resample

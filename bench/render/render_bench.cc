@@ -1,0 +1,197 @@
+// reflcap_render_bench: images per second of the CPU reference renderer and of the Vulkan
+// renderer re-rendering a synthetic capture, as `reflcap render` does (one image with its mask
+// and aux buffers per call, read back to host memory; files are not written).
+//
+//   BM_Render/<backend>/<size>[/distorted]   backend cpu or vulkan; size = image width = height;
+//                                            "distorted": the capture's camera gets real lens
+//                                            distortion (the Vulkan renderer's resolve path).
+//
+// Each capture is synthesised at start-up (noise-free; 1 camera x 2 lights x 2 turntable steps;
+// 20,000 texels at 192 px, scaled with the image area up to 1,000,000) and every image of it is
+// rendered by both backends and compared before anything is timed: the Vulkan render must meet
+// the criterion (PSNR >= 50 dB excluding 2 px around shadow edges and silhouettes,
+// render/vulkan/render_agreement.h), else that capture's benchmarks fail with the numbers.
+//
+// Timing: host wall clock per image (Google Benchmark's real time): CPU rendering on all cores;
+// Vulkan = record + submit + fence wait + read-back; the gpu_s counter is the submit + fence part.
+// On lavapipe the Vulkan "GPU" is this machine's CPU (LLVM-compiled shaders on all cores), shared
+// with everything else running: its numbers are CPU numbers. See bench/render/README.md.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "acquire/synth/synth.h"
+#include "engine/capture/capture.h"
+#include "engine/core/log.h"
+#include "engine/core/status.h"
+#include "render/reference/render_capture.h"
+#include "render/vulkan/render_agreement.h"
+#include "render/vulkan/vulkan_render_capture.h"
+#include "render/vulkan/vulkan_renderer.h"
+
+namespace reflcap::render {
+namespace {
+namespace fs = std::filesystem;
+
+// Texels of the synthetic capture at 192 px (the "small" preset), scaled with the image area.
+constexpr double kTexelsAt192 = 20000;
+constexpr double kMaxTexels = 1e6;
+// Lens distortion of the "distorted" variants: barrel with decentring, as a short lens has.
+constexpr std::array<double, 5> kDistortion = {-0.18, 0.09, 0.0012, -0.0008, -0.015};
+
+struct Case {
+  int size = 0;
+  bool distorted = false;
+  Capture capture;
+  std::unique_ptr<FittedCapture> fitted;
+  std::unique_ptr<VulkanRenderer> renderer;
+  RenderAgreement agreement;  // pooled over the capture's images
+  double worst_psnr_db = 0;
+};
+
+std::vector<std::unique_ptr<Case>> g_cases;
+
+RenderOptions Options() {
+  RenderOptions o;
+  o.aux_buffers = true;  // as `reflcap render` renders
+  return o;
+}
+
+StatusOr<std::unique_ptr<Case>> Prepare(int size, bool distorted, const fs::path& root,
+                                        const std::string& device) {
+  auto c = std::make_unique<Case>();
+  c->size = size;
+  c->distorted = distorted;
+  const fs::path dir = root / ("capture_" + std::to_string(size));
+  if (!fs::exists(dir / "capture.json")) {
+    synth::SynthOptions o;
+    o.noise = 0;
+    o.image_size = size;
+    o.texels = int64_t(std::min(kMaxTexels, kTexelsAt192 * (size / 192.0) * (size / 192.0)));
+    o.cameras = 1;
+    o.lights = 2;
+    o.steps = 2;
+    REFLCAP_RETURN_IF_ERROR(synth::WriteSyntheticCapture(o, dir).status());
+  }
+  REFLCAP_ASSIGN_OR_RETURN(c->capture, ReadCapture(dir / "capture.json"));
+  if (distorted) {
+    for (Camera& cam : c->capture.cameras) cam.dist = kDistortion;
+  }
+  REFLCAP_ASSIGN_OR_RETURN(c->fitted, LoadFittedCapture(c->capture, dir / "gt/params.exr"));
+  REFLCAP_ASSIGN_OR_RETURN(c->renderer, VulkanRenderer::Create(device));
+  REFLCAP_RETURN_IF_ERROR(SetFittedScene(*c->renderer, *c->fitted));
+  // Verify before timing.
+  c->worst_psnr_db = 1e9;
+  for (size_t i = 0; i < c->capture.images.size(); ++i) {
+    REFLCAP_ASSIGN_OR_RETURN(RenderResult cpu, RenderCaptureImage(*c->fitted, i, Options()));
+    REFLCAP_ASSIGN_OR_RETURN(RenderResult gpu,
+                             RenderCaptureImageVulkan(*c->renderer, *c->fitted, i, Options()));
+    const RenderAgreement a = CompareRenders(cpu, gpu);
+    c->worst_psnr_db = std::min(c->worst_psnr_db, a.psnr_db);
+    c->agreement.Add(a);
+  }
+  return c;
+}
+
+void BM_Render(benchmark::State& state, Case* c, bool vulkan) {
+  if (c->worst_psnr_db < kMinAgreementPsnrDb) {
+    state.SkipWithError(StrCat("Vulkan render disagrees with the CPU reference: worst image ",
+                               c->worst_psnr_db, " dB; ", c->agreement.ToString())
+                            .c_str());
+    return;
+  }
+  const size_t n = c->capture.images.size();
+  size_t i = 0;
+  double gpu_s = 0;
+  for (auto _ : state) {
+    StatusOr<RenderResult> r =
+        vulkan ? RenderCaptureImageVulkan(*c->renderer, *c->fitted, i % n, Options())
+               : RenderCaptureImage(*c->fitted, i % n, Options());
+    if (!r.ok()) {
+      state.SkipWithError(r.status().ToString().c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(r->pixels.data.data());
+    if (vulkan) gpu_s += c->renderer->last_stats().gpu_seconds;
+    ++i;
+  }
+  state.SetItemsProcessed(int64_t(state.iterations()));
+  state.counters["images_per_s"] =
+      benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["texels"] = double(c->fitted->atlas.TexelCount());
+  state.counters["psnr_worst_db"] = c->worst_psnr_db;
+  state.counters["excluded_pct"] = 100 * c->agreement.ExcludedFraction();
+  if (vulkan) {
+    state.counters["gpu_s"] = gpu_s / double(std::max<int64_t>(1, state.iterations()));
+    state.SetLabel(c->renderer->last_stats().shadow_map + " shadow map " +
+                   std::to_string(c->renderer->last_stats().shadow_resolution) + " px");
+  }
+}
+
+std::vector<int> Sizes() {
+  std::vector<int> sizes = {192, 512};
+  if (const char* env = std::getenv("REFLCAP_BENCH_RENDER_SIZES")) {
+    sizes.clear();
+    std::stringstream in(env);
+    std::string item;
+    while (std::getline(in, item, ',')) {
+      if (!item.empty()) sizes.push_back(std::atoi(item.c_str()));
+    }
+  }
+  return sizes;
+}
+
+}  // namespace
+}  // namespace reflcap::render
+
+int main(int argc, char** argv) {
+  using namespace reflcap;
+  using namespace reflcap::render;
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  SetLogThreshold(LogLevel::kWarning);
+  const char* device_env = std::getenv("REFLCAP_BENCH_VK_DEVICE");
+  const std::string device = device_env ? device_env : "";
+  const fs::path root = fs::temp_directory_path() / "reflcap_render_bench";
+  std::error_code ec;
+  fs::create_directories(root, ec);
+  for (int size : Sizes()) {
+    for (bool distorted : {false, true}) {
+      auto c = Prepare(size, distorted, root, device);
+      if (!c.ok()) {
+        std::fprintf(stderr, "reflcap_render_bench: %d px: %s\n", size,
+                     c.status().ToString().c_str());
+        return ExitCodeFor(c.status());
+      }
+      std::printf("%d px%s: %zu texels, %zu images; Vulkan vs CPU: worst image %.1f dB, %s\n", size,
+                  distorted ? " (distorted)" : "", (*c)->fitted->atlas.TexelCount(),
+                  (*c)->capture.images.size(), (*c)->worst_psnr_db,
+                  (*c)->agreement.ToString().c_str());
+      g_cases.push_back(std::move(c).value());
+    }
+  }
+  const gpu::DeviceInfo& d = g_cases.front()->renderer->device();
+  std::printf("device: %s%s\ntiming: host wall clock per image (with read-back)\n",
+              d.ToString().c_str(), d.IsSoftware() ? " (a CPU device: these are CPU numbers)" : "");
+  benchmark::AddCustomContext("device", d.ToString());
+  for (const auto& c : g_cases) {
+    const std::string suffix = std::to_string(c->size) + (c->distorted ? "/distorted" : "");
+    benchmark::RegisterBenchmark(("BM_Render/cpu/" + suffix).c_str(), BM_Render, c.get(), false)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("BM_Render/vulkan/" + suffix).c_str(), BM_Render, c.get(), true)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  g_cases.clear();
+  return 0;
+}

@@ -1,0 +1,66 @@
+// Re-rendering a capture with the Vulkan renderer (see vulkan_render_capture.h).
+#include "render/vulkan/vulkan_render_capture.h"
+
+namespace reflcap::render {
+
+Status SetFittedScene(VulkanRenderer& renderer, const FittedCapture& fitted) {
+  if (fitted.normal_map) {
+    const Capture& capture = *fitted.capture;
+    return renderer.SetNormalMapScene(fitted.atlas, fitted.maps,
+                                      capture.cameras[capture.normal_map->camera]);
+  }
+  return renderer.SetScene({fitted.scene.get(), &fitted.atlas, &fitted.maps});
+}
+
+StatusOr<RenderResult> RenderCaptureImageVulkan(VulkanRenderer& renderer,
+                                                const FittedCapture& fitted, size_t index,
+                                                const RenderOptions& options) {
+  const Capture& capture = *fitted.capture;
+  REFLCAP_CHECK(index < capture.images.size());
+  const CaptureImage& image = capture.images[index];
+  const Camera& camera = capture.cameras[image.camera];
+  const Light& light = capture.lights[image.light];
+  StatusOr<RenderResult> result =
+      fitted.normal_map ? renderer.RenderNormalMapImage(camera, light, image.exposure_s, options)
+                        : renderer.RenderImage(camera, light, capture.WorldFromObject(image),
+                                               image.exposure_s, options);
+  if (!result.ok()) {
+    return result.status().WithContext(StrCat(capture.json_path.string(), ": images[", index, "]"));
+  }
+  return result;
+}
+
+CaptureRenderBackend VulkanCaptureRenderBackend(VulkanRenderer& renderer) {
+  CaptureRenderBackend b;
+  b.backend = "vulkan";
+  b.device = renderer.device().ToString();
+  const VulkanRenderOptions& o = renderer.options();
+  const char* point = o.shadow_map == ShadowMapKind::kCube ? "cube map"
+                      : o.shadow_map == ShadowMapKind::kFitted
+                          ? "frustum fitted to the object"
+                          : "frustum fitted to the object when "
+                            "the light is outside it, else "
+                            "cube map";
+  b.renderer = StrCat(
+      "Vulkan renderer (render/vulkan): rasterised direct light, per-fragment Lambert + "
+      "Lafortune, shadow maps (point lights: ",
+      point, "; directional: orthographic; ", o.shadow_texels_per_pixel,
+      " shadow texels per image pixel, at least ", o.min_shadow_resolution,
+      " per side), exact distorted rays through a visibility image, no "
+      "interreflection");
+  b.prepare = [&renderer](const FittedCapture& fitted) { return SetFittedScene(renderer, fitted); };
+  b.render = [&renderer](const FittedCapture& fitted, size_t index, const RenderOptions& options) {
+    return RenderCaptureImageVulkan(renderer, fitted, index, options);
+  };
+  return b;
+}
+
+StatusOr<CaptureRenderSummary> RenderCaptureVulkan(const Capture& capture,
+                                                   const std::filesystem::path& params_exr,
+                                                   const std::filesystem::path& out_dir,
+                                                   const CaptureRenderOptions& options,
+                                                   VulkanRenderer& renderer) {
+  return RenderCapture(capture, params_exr, out_dir, options, VulkanCaptureRenderBackend(renderer));
+}
+
+}  // namespace reflcap::render

@@ -1,0 +1,156 @@
+#pragma once
+// The Vulkan renderer: headless rasterisation of a textured mesh whose atlas texels carry Lambert +
+// Lafortune parameters — the GPU twin of the CPU reference renderer
+// (render/reference/reference_renderer.h), with the same inputs, outputs and radiometry, so that
+// `reflcap render --backend vulkan` writes the same files as `--backend cpu`.
+//
+// Per image:
+//   1. Shadow map (cast_shadows, mesh captures): the object's distance from the light rendered
+//      into an R32F map — a cube map (six 90° faces) for a point light inside or near the object's
+//      bounding sphere, one perspective frustum fitted to that sphere for a point light outside it
+//      (the turntable rigs: ~10x the texels on the object that a cube face would give), an
+//      orthographic box fitted to the sphere for a directional light. Shadow test with
+//      receiver-plane depth and a one-texel bias (shaders/render/shading.glsl explains both).
+//   2. Camera pass: the mesh rasterised with the camera's projection (pinhole K, or orthographic
+//      with pixel_size_m) so that each pixel centre is sampled exactly where the CPU renderer
+//      casts its ray; every fragment is shaded in the texel's tangent frame with the GLSL twins of
+//      brdf/lafortune.h (surface.frag). Supersampling N renders at N x N the resolution (the
+//      CPU's stratum centres) and box-filters; mask and aux buffers come from a 1x pass (the CPU
+//      takes them from the centre ray).
+//   3. Lens distortion: the undistorted grid is rasterised as triangle ids (a visibility image
+//      covering the undistorted footprint of the image), and a compute pass follows each output
+//      pixel's exact distorted ray: it intersects the triangles seen around where the ray lands
+//      and shades the nearest hit with the same shading code (distort_resolve.comp). Colour is
+//      never interpolated, so distortion costs no accuracy away from silhouettes.
+//   Normal-map captures have no mesh to rasterise: a compute pass shades each texel (= masked
+//   pixel) as RenderNormalMapImage does (normal_map_shade.comp).
+//
+// Material: parameter maps in atlas layout as an RGBA32F texture array (read with texelFetch at
+// the atlas pixel under the interpolated UV, with the CPU's 3x3 fallback), per-texel tangents as
+// a second texture, per-triangle geometric normals and curvature in a storage buffer.
+//
+// Agreement with the CPU renderer (tests/render/vulkan, render_agreement.h): away from
+// silhouettes and cast-shadow edges the two differ by float rounding — ~1e-6 relative on smooth
+// Lambertian surfaces; up to ~1e-4 under sharp lobes, where b^n amplifies the rasteriser's
+// sub-pixel vertex snapping n-fold — plus rare shadow-map misses at grazing light (the bias
+// tradeoff in shaders/render/shading.glsl); at silhouettes the rasteriser's coverage rule and at
+// shadow edges the shadow map's texels decide pixels that the CPU's rays decide differently. On
+// the synthetic relief object that is 75-90 dB PSNR with 2 px around those edges excluded.
+//
+// Errors: Unavailable when there is no Vulkan device with a graphics queue, when the device lacks
+// a needed format, or when the scene exceeds a device limit (say which); InvalidArgument for bad
+// options or a camera/light the CPU renderer would also refuse. Not thread-safe: one renderer per
+// thread (it owns or borrows one VkContext and records into one command buffer).
+#include <memory>
+#include <string>
+
+#include "engine/camera/camera.h"
+#include "engine/capture/capture.h"
+#include "engine/core/status.h"
+#include "engine/geometry/rigid3.h"
+#include "engine/gpu/device_info.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/brdf_maps.h"
+#include "render/reference/reference_renderer.h"
+
+namespace reflcap::gpu {
+class VkContext;
+}
+
+namespace reflcap::render {
+
+// Which shadow map a point light gets.
+enum class ShadowMapKind {
+  kAuto,    // kFitted when the light is outside the object's bounding sphere (by kFitMargin),
+            // else kCube
+  kCube,    // six 90° faces around the light
+  kFitted,  // one perspective frustum around the bounding sphere (light must be outside it)
+};
+const char* ShadowMapKindName(ShadowMapKind kind);
+
+struct VulkanRenderOptions {
+  // Point lights' shadow map (directional lights always get an orthographic map).
+  ShadowMapKind shadow_map = ShadowMapKind::kAuto;
+  // Automatic shadow-map resolution: this many shadow texels per image pixel, measured along a
+  // line at the object's centre (a receiver facing the light). Higher = shadow edges closer to
+  // the CPU's exact ones, at the cost of memory and rasterisation time. Range (0, 64].
+  double shadow_texels_per_pixel = 2;
+  // Bounds of the automatic resolution (texels per side): [min, max] for single maps, max_cube for
+  // each cube face. Each in [16, 16384]; min <= max. The minimum is in units of the object, not
+  // of the image: small concave features (a groove a few mm wide on a 0.1 m object) shadow
+  // themselves wrongly below ~1000 texels across the object, whatever the image size.
+  int min_shadow_resolution = 1024;
+  int max_shadow_resolution = 4096;
+  int max_cube_resolution = 2048;
+  // A fixed resolution instead (0 = automatic). [0, 16384].
+  int shadow_resolution = 0;
+  // Shadow bias beyond the surface offset, in texel footprints, times (1 + the light's slope
+  // tan θ, at most 10) (shading.glsl). [0, 16].
+  double shadow_bias_texels = 1.0;
+  // Largest receiver-plane correction behind the point, in texel footprints (shading.glsl).
+  // [0, 1000].
+  double shadow_plane_limit_texels = 8;
+  // Distorted cameras: visibility-image texels per output pixel along each axis (1 or 2; 2 finds
+  // sub-pixel triangles more often, at 4x the visibility pass).
+  int visibility_scale = 1;
+  // Render pinhole cameras without distortion through the distortion path as well (visibility
+  // image + exact rays) instead of the per-fragment path: for tests and comparisons.
+  bool always_resolve = false;
+
+  Status Validate() const;
+};
+
+// kAuto picks kFitted when |light - centre| > kFitMargin * radius of the bounding sphere.
+constexpr double kFitMargin = 1.05;
+
+// What the last RenderImage did (for reports and benchmarks).
+struct VulkanRenderStats {
+  std::string shadow_map = "none";  // "none", "cube", "fitted", "orthographic"
+  int shadow_resolution = 0;        // texels per side (per face for a cube map)
+  bool distortion_resolve = false;  // distorted camera: visibility image + exact rays
+  int visibility_width = 0, visibility_height = 0;
+  double seconds = 0;      // host wall clock of the whole call
+  double gpu_seconds = 0;  // submit + fence wait of the command buffer
+};
+
+class VulkanRenderer {
+ public:
+  // A renderer on its own VkContext, on device `device` (ContextOptions::device: "" automatic,
+  // an index, or a name substring) with a graphics queue.
+  static StatusOr<std::unique_ptr<VulkanRenderer>> Create(const std::string& device,
+                                                          const VulkanRenderOptions& options = {});
+  // A renderer on the caller's context, which must outlive it and have been created with
+  // ContextOptions::require_graphics.
+  static StatusOr<std::unique_ptr<VulkanRenderer>> Create(gpu::VkContext* ctx,
+                                                          const VulkanRenderOptions& options = {});
+  ~VulkanRenderer();
+  VulkanRenderer(const VulkanRenderer&) = delete;
+  VulkanRenderer& operator=(const VulkanRenderer&) = delete;
+
+  const gpu::DeviceInfo& device() const;
+  const VulkanRenderOptions& options() const;
+  const VulkanRenderStats& last_stats() const;
+
+  // Uploads a mesh scene (geometry, atlas tangents, parameter maps); replaces any earlier scene.
+  // maps must have one entry per atlas texel (checked). Unavailable when the mesh or the atlas
+  // exceeds a device limit.
+  Status SetScene(const ShadedScene& scene);
+  // Uploads a normal-map scene: atlas from BuildNormalMapAtlas, maps one entry per texel.
+  Status SetNormalMapScene(const TexelAtlas& atlas, const BrdfMaps& maps, const Camera& camera);
+
+  // RenderImage of reference_renderer.h on the GPU, for the scene of SetScene.
+  StatusOr<RenderResult> RenderImage(const Camera& camera, const Light& light,
+                                     const Rigid3& world_from_object, double exposure_s,
+                                     const RenderOptions& options);
+  // RenderNormalMapImage of reference_renderer.h, for the scene of SetNormalMapScene (whose
+  // camera must be `camera`'s size).
+  StatusOr<RenderResult> RenderNormalMapImage(const Camera& camera, const Light& light,
+                                              double exposure_s, const RenderOptions& options);
+
+ private:
+  VulkanRenderer();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace reflcap::render

@@ -1,0 +1,198 @@
+#version 460
+// Shading of a camera with lens distortion. The rasteriser can only sample the undistorted
+// (pinhole) pixel grid, so the renderer first rasterises triangle indices at that grid over the
+// undistorted footprint of the image (visibility.frag, the "visibility image"), then this pass
+// takes, for each output pixel (and each N x N sub-sample), the exact ray of the distorted camera
+// (PixelRay: undistortion as in Camera::PixelRay), looks up the visibility image around where that
+// ray lands, intersects the ray with each triangle found there (3x3 texels) and shades the nearest
+// hit with render/shading.glsl — the same function surface.frag calls. So distortion is
+// "render undistorted, then remap", but what is remapped is visibility, not colour: the shaded
+// value is evaluated at the exact ray hit, with no interpolation of the image.
+//
+// Hit choice (FindHit): the nearest triangle containing the ray's hit among the candidates and
+// the triangles reached by walking over the mesh from them towards the hit (slivers that fell
+// between the visibility samples, e.g. beside an occluding contour); failing that, inside the
+// object's image only, the least-missed candidate's plane.
+//
+// Bindings (set 0): 0 RenderParams, 1 RenderCorner[], 2 RenderTriangle[], 3 material, 4 frame,
+//   5 shadow map (render/render_inputs.glsl); 6 visibility (usampler2DArray, R32_UINT: triangle
+//   + 1, 0 = background); 7 out radiance vec4[width * height] (rgb exposure-weighted, a = mask);
+//   8 out aux vec4[width * height] (cast_shadow, cos_theta_i, cos_theta_o, curvature).
+// Push constants: none. Specialization: none (8 x 8 workgroups).
+// C++ twin: RenderImage in render/reference/reference_renderer.cc (ray per sample, centre ray for
+//   mask and aux).
+#extension GL_GOOGLE_include_directive : require
+
+#define REFLCAP_RENDER_CORNERS
+#include "render/camera.glsl"
+#include "render/shading.glsl"
+
+layout(local_size_x = 8, local_size_y = 8) in;
+
+layout(set = 0, binding = 6) uniform usampler2DArray visibility;
+layout(std430, set = 0, binding = 7) writeonly buffer OutRadiance { vec4 out_radiance[]; };
+layout(std430, set = 0, binding = 8) writeonly buffer OutAux { vec4 out_aux[]; };
+
+// Visibility texels searched around the ray's landing point, in each direction.
+const int kSearchRadius = 1;
+const int kMaxCandidates = (2 * kSearchRadius + 1) * (2 * kSearchRadius + 1);
+// Triangles a walk crosses from a candidate before giving up.
+const int kMaxWalkSteps = 8;
+
+struct Hit {
+  bool found;
+  uint triangle;
+  float b1, b2;  // barycentrics of corners 1 and 2
+};
+
+// Möller–Trumbore: t along the (unit) ray and the barycentrics (b0, b1, b2) of the point where it
+// meets the plane of triangle `tri`. False for a ray parallel to the plane.
+bool IntersectPlane(vec3 o, vec3 d, uint tri, out float t, out vec3 b) {
+  vec3 v0 = corners[3u * tri].position_u.xyz;
+  vec3 e1 = corners[3u * tri + 1u].position_u.xyz - v0;
+  vec3 e2 = corners[3u * tri + 2u].position_u.xyz - v0;
+  vec3 pvec = cross(d, e2);
+  float det = dot(e1, pvec);
+  t = 0.0;
+  b = vec3(0.0);
+  if (det == 0.0) return false;
+  float inv = 1.0 / det;
+  vec3 tvec = o - v0;
+  float b1 = dot(tvec, pvec) * inv;
+  vec3 qvec = cross(tvec, e1);
+  float b2 = dot(d, qvec) * inv;
+  t = dot(e2, qvec) * inv;
+  b = vec3(1.0 - b1 - b2, b1, b2);
+  return true;
+}
+
+uint VisibilityAt(ivec2 q) {
+  if (q.x < 0 || q.y < 0 || q.x >= int(params.vis_width) || q.y >= int(params.vis_height)) {
+    return 0u;
+  }
+  return texelFetch(visibility, ivec3(q, 0), 0).r;
+}
+
+float MinComponent(vec3 b) { return min(b.x, min(b.y, b.z)); }
+
+// The triangle the ray (o, d) hits, found from the triangles the visibility image shows around
+// `vis_pixel` (see the file comment): from each candidate, a walk across the edge the ray's plane
+// hit lies beyond (RenderTriangle::neighbours), up to kMaxWalkSteps triangles, until a triangle
+// contains the hit — which finds sub-texel triangles on connected surfaces, such as the sliver of
+// a bump's flank seen at grazing angle in front of the surface the texels show. The nearest hit
+// found wins. If none is found — only deep inside the object's image (every searched texel
+// covered), for unconnected meshes — the candidate the ray misses least, extrapolated over its
+// plane.
+Hit FindHit(vec3 o, vec3 d, vec2 vis_pixel) {
+  ivec2 c = ivec2(floor(vis_pixel + 0.5));  // nearest texel (centres at integer coordinates)
+  uint ids[kMaxCandidates];
+  int count = 0;
+  bool covered = true;
+  for (int dy = -kSearchRadius; dy <= kSearchRadius; ++dy) {
+    for (int dx = -kSearchRadius; dx <= kSearchRadius; ++dx) {
+      uint id = VisibilityAt(c + ivec2(dx, dy));
+      if (id == 0u) {
+        covered = false;
+        continue;
+      }
+      bool seen = false;
+      for (int i = 0; i < count; ++i) seen = seen || ids[i] == id;
+      if (!seen) ids[count++] = id;
+    }
+  }
+  Hit best;
+  best.found = false;
+  float best_t = 3.0e38;
+  Hit outside;
+  outside.found = false;
+  float outside_score = -3.0e38;
+  for (int i = 0; i < count; ++i) {
+    uint tri = ids[i] - 1u;
+    for (int step = 0; step < kMaxWalkSteps; ++step) {
+      float t;
+      vec3 b;
+      if (!IntersectPlane(o, d, tri, t, b) || !(t > 0.0)) break;
+      float score = MinComponent(b);
+      if (score >= 0.0) {
+        if (t < best_t) {
+          best_t = t;
+          best = Hit(true, tri, b.y, b.z);
+        }
+        break;
+      }
+      if (step == 0 && score > outside_score) {
+        outside_score = score;
+        outside = Hit(true, tri, b.y, b.z);
+      }
+      int k = b.x <= b.y && b.x <= b.z ? 0 : (b.y <= b.z ? 1 : 2);
+      int next = triangles[tri].neighbours[k];
+      if (next < 0) break;
+      tri = uint(next);
+    }
+  }
+  if (best.found) return best;
+  if (covered) return outside;
+  outside.found = false;
+  return outside;
+}
+
+struct Sample {
+  bool hit;
+  vec3 radiance;
+  vec4 aux;
+};
+
+Sample TraceSample(vec2 pixel) {
+  Sample s;
+  s.hit = false;
+  s.radiance = vec3(0.0);
+  s.aux = vec4(0.0);
+  float yd = (pixel.y - params.intrinsics.w) / params.intrinsics.y;
+  float xd = (pixel.x - params.intrinsics.z - params.intrinsics_extra.x * yd) / params.intrinsics.x;
+  vec2 xy = Undistort(vec2(xd, yd), params.distortion, params.distortion_extra.x);
+  vec3 d_cam = normalize(vec3(xy, 1.0));
+  vec3 d = normalize(vec3(dot(params.object_from_cam[0].xyz, d_cam),
+                          dot(params.object_from_cam[1].xyz, d_cam),
+                          dot(params.object_from_cam[2].xyz, d_cam)));
+  vec3 o = params.camera_origin.xyz;
+  vec2 vis_pixel = vec2(params.vis_intrinsics.x * xy.x + params.vis_intrinsics_extra.x * xy.y +
+                            params.vis_intrinsics.z,
+                        params.vis_intrinsics.y * xy.y + params.vis_intrinsics.w);
+  Hit h = FindHit(o, d, vis_pixel);
+  if (!h.found) return s;
+  s.hit = true;
+  uint i0 = 3u * h.triangle;
+  float b0 = 1.0 - h.b1 - h.b2;
+  RenderCorner c0 = corners[i0], c1 = corners[i0 + 1u], c2 = corners[i0 + 2u];
+  vec3 p = b0 * c0.position_u.xyz + h.b1 * c1.position_u.xyz + h.b2 * c2.position_u.xyz;
+  vec3 n_s = normalize(b0 * c0.normal_v.xyz + h.b1 * c1.normal_v.xyz + h.b2 * c2.normal_v.xyz);
+  vec2 uv = b0 * vec2(c0.position_u.w, c0.normal_v.w) +
+            h.b1 * vec2(c1.position_u.w, c1.normal_v.w) +
+            h.b2 * vec2(c2.position_u.w, c2.normal_v.w);
+  vec4 tri = triangles[h.triangle].normal_curvature;
+  Shade sh = ShadeSurface(p, n_s, tri.xyz, uv, -d, tri.w);
+  s.radiance = sh.radiance;
+  s.aux = sh.aux;
+  return s;
+}
+
+void main() {
+  uvec2 px = gl_GlobalInvocationID.xy;
+  if (px.x >= params.width || px.y >= params.height) return;
+  uint index = px.y * params.width + px.x;
+  Sample centre = TraceSample(vec2(px));
+  uint n = params.supersampling;
+  vec3 sum = centre.radiance;
+  if (n > 1u) {
+    sum = vec3(0.0);
+    for (uint sy = 0u; sy < n; ++sy) {
+      for (uint sx = 0u; sx < n; ++sx) {
+        // Stratum centres: offsets (i + 0.5) / n - 0.5 within the pixel, as the CPU renderer.
+        vec2 offset = (vec2(sx, sy) + 0.5) / float(n) - 0.5;
+        sum += TraceSample(vec2(px) + offset).radiance;
+      }
+    }
+  }
+  out_radiance[index] = vec4(sum * params.intensity.w, centre.hit ? 1.0 : 0.0);
+  out_aux[index] = centre.aux;
+}

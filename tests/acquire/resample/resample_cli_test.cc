@@ -1,0 +1,159 @@
+// `reflcap resample` end to end: exit codes and messages for bad input, refusal to overwrite, and
+// no half-written output or staging leftovers after a failure.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/atomic_file.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap {
+namespace {
+namespace fs = std::filesystem;
+
+struct CliResult {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
+                              " 2>" + err.string();
+  const int status = std::system(command.c_str());
+  CliResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadTextFile(out).value();
+  r.err = ReadTextFile(err).value();
+  return r;
+}
+
+// A tiny noise-free synthetic capture shared by these tests (made once, removed at exit).
+testing::ScratchDir* g_dir = nullptr;
+class Cleanup : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    delete g_dir;
+    g_dir = nullptr;
+  }
+};
+::testing::Environment* const g_cleanup = ::testing::AddGlobalTestEnvironment(new Cleanup);
+
+const fs::path& TinyCapture() {
+  static const fs::path capture = [] {
+    g_dir = new testing::ScratchDir();
+    testing::ScratchDir logs;
+    const fs::path out = *g_dir / "tiny";
+    CliResult r = RunCli("synth --quiet --out " + out.string() +
+                             " --texels 1500 --image-size 48 --cameras 2 --lights 2 --steps 4 "
+                             "--noise 0",
+                         logs);
+    REFLCAP_CHECK(r.exit_code == 0) << r.err;
+    return out;
+  }();
+  return capture;
+}
+
+// Names in `dir` that look like staging or temporary leftovers.
+std::vector<std::string> Leftovers(const fs::path& dir) {
+  std::vector<std::string> found;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (name.find(".tmp") != std::string::npos || name.find(".spill") != std::string::npos) {
+      found.push_back(name);
+    }
+  }
+  return found;
+}
+
+TEST(ResampleCli, WritesAStoreReportAndMaps) {
+  testing::ScratchDir dir;
+  const fs::path out = dir / "samples";
+  CliResult r = RunCli("resample " + TinyCapture().string() + " --out " + out.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("samples kept"), std::string::npos) << r.out;
+  for (const char* name : {"store.json", "atlas.bin", "chunk_00000.rcs", "resample_report.json",
+                           "coverage.exr", "coverage.png", "domain.exr"}) {
+    EXPECT_TRUE(fs::exists(out / name)) << name;
+  }
+  EXPECT_TRUE(Leftovers(out).empty());
+  EXPECT_TRUE(Leftovers(dir.path()).empty());
+  const auto report = nlohmann::json::parse(ReadTextFile(out / "resample_report.json").value());
+  EXPECT_GT(report["samples_kept"].get<int>(), 0);
+  EXPECT_EQ(report["split"], "train");
+}
+
+TEST(ResampleCli, MissingCaptureExitsTwoNamingIt) {
+  testing::ScratchDir dir;
+  const fs::path missing = dir / "nowhere" / "capture.json";
+  CliResult r = RunCli("resample " + missing.string() + " --out " + (dir / "a/b").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find(missing.string()), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "a")) << "nothing is created for a capture that cannot be read";
+}
+
+TEST(ResampleCli, VulkanBackendIsNotAvailable) {
+  testing::ScratchDir dir;
+  CliResult r = RunCli("resample " + TinyCapture().string() + " --out " + (dir / "s").string() +
+                           " --backend vulkan",
+                       dir);
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("not available"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "s"));
+}
+
+TEST(ResampleCli, BadOptionsAreUsageErrors) {
+  testing::ScratchDir dir;
+  const std::string base = "resample " + TinyCapture().string() + " --out " + (dir / "s").string();
+  for (const std::string bad : {" --min-cos 1.5", " --min-cos -0.1", " --min-cos banana",
+                                 " --split test", " --backend cuda", " --atlas-res -3",
+                                 " --read-sigma -2", " --frobnicate"}) {
+    CliResult r = RunCli(base + bad, dir);
+    EXPECT_EQ(r.exit_code, 1) << bad << ": " << r.err;
+    EXPECT_FALSE(r.err.empty()) << bad;
+  }
+  CliResult r = RunCli("resample " + TinyCapture().string(), dir);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
+  r = RunCli("resample --help", dir);
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.out.find("usage: reflcap resample"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "s"));
+}
+
+TEST(ResampleCli, RefusesANonEmptyFolderAndKeepsItsContents) {
+  testing::ScratchDir dir;
+  testing::WriteText(dir / "mine/notes.txt", "precious");
+  CliResult r = RunCli("resample " + TinyCapture().string() + " --out " + (dir / "mine").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("not empty"), std::string::npos) << r.err;
+  EXPECT_EQ(ReadTextFile(dir / "mine/notes.txt").value(), "precious");
+  EXPECT_TRUE(Leftovers(dir.path()).empty());
+  r = RunCli("resample --quiet " + TinyCapture().string() + " --out " + (dir / "mine").string() +
+                 " --overwrite",
+             dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "mine/notes.txt"));
+  EXPECT_TRUE(fs::exists(dir / "mine/store.json"));
+  EXPECT_TRUE(Leftovers(dir.path()).empty());
+}
+
+TEST(ResampleCli, AnUnreadablePhotographLeavesNothingBehind) {
+  testing::ScratchDir dir;
+  const fs::path copy = dir / "capture";
+  fs::copy(TinyCapture(), copy, fs::copy_options::recursive);
+  // Keep the EXR header (so the up-front header check passes) but cut the pixels short: the
+  // failure comes mid-run, after the output folder has been staged.
+  const fs::path image = copy / "images/0000.exr";  // a train image
+  fs::resize_file(image, fs::file_size(image) * 6 / 10);
+  CliResult r = RunCli("resample " + copy.string() + " --out " + (dir / "samples").string(), dir);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("images[0].file"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("capture.json"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "samples"));
+  EXPECT_TRUE(Leftovers(dir.path()).empty());
+}
+
+}  // namespace
+}  // namespace reflcap
