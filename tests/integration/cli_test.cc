@@ -1,7 +1,6 @@
 // End-to-end checks of the `reflcap` executable: exit codes, messages naming file and field for
 // every malformed-input case, refusal to overwrite, and a synth → info round trip.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <fstream>
 #include <sstream>
@@ -16,21 +15,10 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using testing::CliResult;
 
 CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
-                              " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadTextFile(out).value();
-  r.err = ReadTextFile(err).value();
-  return r;
+  return testing::RunCommand(REFLCAP_BINARY, args, dir);
 }
 
 // A tiny synthetic capture shared by the tests of this file (made once).

@@ -6,6 +6,9 @@
 #include <cstdlib>
 #include <fstream>
 
+#include <sys/wait.h>
+
+#include "engine/core/atomic_file.h"
 #include "engine/core/check.h"
 
 namespace reflcap::testing {
@@ -40,6 +43,21 @@ void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;
   REFLCAP_CHECK(bool(out)) << "cannot write " << path;
+}
+
+}  // namespace reflcap::testing
+
+namespace reflcap::testing {
+
+CliResult RunCommand(const std::string& binary, const std::string& args, const ScratchDir& dir) {
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command = binary + " " + args + " >" + out.string() + " 2>" + err.string();
+  const int status = std::system(command.c_str());
+  CliResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadTextFile(out).value();
+  r.err = ReadTextFile(err).value();
+  return r;
 }
 
 }  // namespace reflcap::testing

@@ -28,3 +28,16 @@ std::optional<std::filesystem::path> SharedDataDir();
 void WriteText(const std::filesystem::path& path, const std::string& text);
 
 }  // namespace reflcap::testing
+
+namespace reflcap::testing {
+
+// What a command printed and how it exited.
+struct CliResult {
+  int exit_code = -1;  // -1 when the command did not exit normally
+  std::string out, err;
+};
+
+// Runs `binary args` through the shell with stdout and stderr captured in files under `dir`.
+CliResult RunCommand(const std::string& binary, const std::string& args, const ScratchDir& dir);
+
+}  // namespace reflcap::testing

@@ -1,7 +1,6 @@
 // `reflcap resample` end to end: exit codes and messages for bad input, refusal to overwrite, and
 // no half-written output or staging leftovers after a failure.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <nlohmann/json.hpp>
 
@@ -12,21 +11,10 @@ namespace reflcap {
 namespace {
 namespace fs = std::filesystem;
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using testing::CliResult;
 
 CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
-                              " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadTextFile(out).value();
-  r.err = ReadTextFile(err).value();
-  return r;
+  return testing::RunCommand(REFLCAP_BINARY, args, dir);
 }
 
 // A tiny noise-free synthetic capture shared by these tests (made once, removed at exit).

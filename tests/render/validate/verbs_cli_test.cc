@@ -2,7 +2,6 @@
 // (1 usage, 2 bad input naming the file, 3 unavailable backend), staging, and a synth -> render ->
 // validate and an import-diligent -> info round trip.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
@@ -18,21 +17,10 @@ namespace reflcap {
 namespace {
 namespace fs = std::filesystem;
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using testing::CliResult;
 
 CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
-                              " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadTextFile(out).value();
-  r.err = ReadTextFile(err).value();
-  return r;
+  return testing::RunCommand(REFLCAP_BINARY, args, dir);
 }
 
 // A tiny noisy synthetic capture, made once for this file.
