@@ -14,6 +14,8 @@ namespace reflcap::cli {
 struct PipelineOptions {
   resample::ResampleOptions resample;  // its split is forced to train
   fit::Backend fit_backend = fit::Backend::kCpu;
+  std::string fit_device;         // --device (Vulkan), empty = automatic
+  std::string fit_backend_choice;  // how --backend auto chose, for fit_report.json
   fit::FitOptions fit;
   bool overwrite = false;
 };
@@ -24,6 +26,16 @@ struct PipelineSummary {
   double fits_per_second = 0;
   validate::ValidateSummary validation;
 };
+// The fit backend a verb runs with. `name` is auto, cpu, ceres or vulkan; auto applies
+// fit::ChooseAutoBackend's rule (a GPU -> vulkan; lavapipe or no Vulkan -> cpu) and logs the
+// choice, a warning when there was no usable device. `device` (--device) needs vulkan or auto.
+// A bad name or combination is InvalidArgument (a usage error).
+struct FitBackendChoice {
+  fit::Backend backend = fit::Backend::kCpu;
+  std::string choice;  // "auto: cpu (...)" when auto chose, else empty
+};
+StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std::string& device);
+
 // Resample (train) -> fit -> render (holdout) -> validate into `out` (staged).
 StatusOr<PipelineSummary> RunPipeline(const std::filesystem::path& capture,
                                       const std::filesystem::path& out,

@@ -2,26 +2,38 @@
 #include <cstdio>
 
 #include "acquire/apps/cli.h"
+#include "acquire/apps/pipeline.h"
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
 #include "engine/fit/fit_driver.h"
 #include "engine/fit/fitter.h"
+#include "engine/fit/vulkan_fitter.h"
 
 namespace reflcap::cli {
 
 int RunFit(int argc, char** argv) {
-  std::string samples, out, backend_name = "cpu", lobe_model = "aniso", init = "seed", loss = "none";
+  std::string samples, out, backend_name = "auto", device, lobe_model = "aniso", init = "seed",
+              loss = "none";
   fit::FitOptions options;
   bool overwrite = false;
   ArgParser args("fit", "SAMPLES --out FIT [options]",
                  "Fit every texel's BRDF (Lambert + K Lafortune lobes per RGB channel) to the\n"
                  "samples of a store written by `reflcap resample`: the seed paper's data-driven\n"
-                 "start and two-stage Levenberg-Marquardt, batched across SIMD lanes and cores.\n"
-                 "Writes FIT/params.exr, sigma.exr, status.exr and fit_report.json.");
+                 "start and two-stage Levenberg-Marquardt, batched across SIMD lanes and cores,\n"
+                 "or on a Vulkan GPU (--backend vulkan: the same algorithm, same outputs).\n"
+                 "--backend auto (default) fits on a GPU when there is one (discrete, integrated\n"
+                 "or virtual) and on the CPU otherwise, also when the only Vulkan device is\n"
+                 "lavapipe (the CPU's own cores run the batched kernel faster); it says which.\n"
+                 "Writes FIT/params.exr, sigma.exr, status.exr and fit_report.json (with the\n"
+                 "backend and the device's name).");
   args.AddPositional("SAMPLES", &samples, "sample store folder (reflcap resample --out)");
   args.AddString("out", &out, "FIT", "output folder (must not exist or be empty)");
   args.AddString("backend", &backend_name, "NAME",
-                 "cpu (batched SIMD, default), ceres (reference), vulkan (not yet available)");
+                 "auto (default: a GPU if there is one, else cpu), cpu (batched SIMD), "
+                 "ceres (reference), vulkan (GPU, or lavapipe)");
+  args.AddString("device", &device, "NAME|INDEX",
+                 "Vulkan device: index or name substring (default: automatic, a discrete GPU "
+                 "first); with auto it asks for that device");
   args.AddInt("lobes", &options.lobes, "Lafortune lobes per texel, 0..3 (default 1; shared: <= 2)");
   args.AddString("lobe-model", &lobe_model, "MODEL",
                  "aniso (default), iso (Cx = Cy) or shared (one lobe shape, per-channel scale)");
@@ -46,11 +58,18 @@ int RunFit(int argc, char** argv) {
     std::fprintf(stderr, "reflcap fit: --out FIT is required\n");
     return kExitUsage;
   }
-  auto backend = fit::ParseBackend(backend_name);
+  auto backend = ResolveFitBackend(backend_name, device);
+  if (!backend.ok()) {
+    if (backend.status().code() == StatusCode::kInvalidArgument) {
+      std::fprintf(stderr, "reflcap fit: %s\n", backend.status().message().c_str());
+      return kExitUsage;
+    }
+    return ReportError("fit", backend.status());
+  }
   auto model = fit::ParseLobeModel(lobe_model);
   auto init_scheme = fit::ParseInitScheme(init);
   auto loss_kind = fit::ParseLossKind(loss);
-  for (const Status* s : {&backend.status(), &model.status(), &init_scheme.status(), &loss_kind.status()}) {
+  for (const Status* s : {&model.status(), &init_scheme.status(), &loss_kind.status()}) {
     if (!s->ok()) {
       std::fprintf(stderr, "reflcap fit: %s\n", s->message().c_str());
       return kExitUsage;
@@ -63,9 +82,11 @@ int RunFit(int argc, char** argv) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
     return kExitUsage;
   }
-  auto summary = fit::RunFit(samples, out, *backend, options, overwrite);
+  auto summary = fit::RunFit(samples, out, backend->backend, options, overwrite, device,
+                              backend->choice);
   if (!summary.ok()) return ReportError("fit", summary.status());
-  std::printf("fit  %s  (%s)\n", out.c_str(), summary->device.c_str());
+  std::printf("fit  %s  (%s%s)\n", out.c_str(), backend->backend == fit::Backend::kVulkan ? "vulkan: " : "",
+              summary->device.c_str());
   std::printf("  texels %zu (with samples %zu), %.0f fits/s, %s\n", summary->texels,
               summary->texels_with_samples, summary->fits_per_second,
               FormatDuration(summary->total_seconds).c_str());

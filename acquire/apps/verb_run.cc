@@ -17,6 +17,7 @@
 #include "engine/core/progress.h"
 #include "engine/fit/fit_driver.h"
 #include "engine/fit/fitter.h"
+#include "engine/fit/vulkan_fitter.h"
 #include "render/reference/render_capture.h"
 #include "render/validate/validate.h"
 
@@ -34,6 +35,29 @@ std::string FormatDb(const std::optional<double>& db) {
 }
 
 }  // namespace
+
+StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std::string& device) {
+  FitBackendChoice result;
+  if (name != "auto") {
+    auto backend = fit::ParseBackend(name);
+    if (!backend.ok()) return InvalidArgumentError(backend.status().message(), " or auto");
+    if (!device.empty() && *backend != fit::Backend::kVulkan) {
+      return InvalidArgumentError("--device needs --backend vulkan or auto");
+    }
+    result.backend = *backend;
+    return result;
+  }
+  REFLCAP_ASSIGN_OR_RETURN(fit::AutoBackendChoice chosen, fit::ChooseAutoBackend(device));
+  result.backend = chosen.backend;
+  result.choice = StrCat("auto: ", fit::BackendName(chosen.backend), " (", chosen.reason, ")");
+  if (chosen.fell_back) {
+    REFLCAP_LOG(kWarning) << "--backend auto: " << chosen.reason;
+  } else {
+    REFLCAP_LOG(kInfo) << "--backend auto: " << fit::BackendName(chosen.backend) << " ("
+                       << chosen.reason << ")";
+  }
+  return result;
+}
 
 StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::path& out,
                                       const PipelineOptions& options) {
@@ -61,7 +85,8 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   REFLCAP_LOG(kInfo) << "run 2/4: fitting";
   REFLCAP_ASSIGN_OR_RETURN(fit::FitRunSummary fitted,
                            fit::RunFit(dir / "samples", dir / "fit", options.fit_backend,
-                                       options.fit, /*overwrite=*/false));
+                                       options.fit, /*overwrite=*/false, options.fit_device,
+                                       options.fit_backend_choice));
   summary.fit_s = SecondsSince(start);
   summary.fit_device = fitted.device;
   summary.fits_per_second = fitted.fits_per_second;
@@ -103,7 +128,7 @@ std::string PipelineSummaryLine(const PipelineSummary& s) {
 }
 
 int RunRun(int argc, char** argv) {
-  std::string capture, out, backend = "cpu", lobe_model = "aniso", init = "seed", loss = "none";
+  std::string capture, out, backend = "auto", device, lobe_model = "aniso", init = "seed", loss = "none";
   PipelineOptions options;
   ArgParser args("run", "CAPTURE --out DIR [options]",
                  "The whole pipeline: resample the train split -> fit -> re-render the holdout\n"
@@ -114,7 +139,9 @@ int RunRun(int argc, char** argv) {
   args.AddInt("atlas-res", &options.resample.atlas_resolution,
               "atlas resolution R (default: the capture's ground truth atlas, else 512)");
   args.AddDouble("min-cos", &options.resample.min_cos, "sample acceptance: n.l and n.v above this (default 0.15)");
-  args.AddString("backend", &backend, "NAME", "fit backend: cpu (default), ceres or vulkan");
+  args.AddString("backend", &backend, "NAME",
+                 "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
+  args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
   args.AddInt("lobes", &options.fit.lobes, "Lafortune lobes per texel, 0..3 (default 1; 0 = Lambert only)");
   args.AddString("lobe-model", &lobe_model, "MODEL", "aniso (default), iso or shared");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
@@ -134,17 +161,15 @@ int RunRun(int argc, char** argv) {
     std::fprintf(stderr, "reflcap run: --out DIR is required\n");
     return kExitUsage;
   }
-  auto fit_backend = fit::ParseBackend(backend);
   auto model = fit::ParseLobeModel(lobe_model);
   auto init_scheme = fit::ParseInitScheme(init);
   auto loss_kind = fit::ParseLossKind(loss);
-  for (const Status& s : {fit_backend.status(), model.status(), init_scheme.status(), loss_kind.status()}) {
+  for (const Status& s : {model.status(), init_scheme.status(), loss_kind.status()}) {
     if (!s.ok()) {
       std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
       return kExitUsage;
     }
   }
-  options.fit_backend = *fit_backend;
   options.fit.lobe_model = *model;
   options.fit.init = *init_scheme;
   options.fit.loss = *loss_kind;
@@ -154,6 +179,17 @@ int RunRun(int argc, char** argv) {
       return kExitUsage;
     }
   }
+  auto fit_backend = ResolveFitBackend(backend, device);
+  if (!fit_backend.ok()) {
+    if (fit_backend.status().code() == StatusCode::kInvalidArgument) {
+      std::fprintf(stderr, "reflcap run: %s\n", fit_backend.status().message().c_str());
+      return kExitUsage;
+    }
+    return ReportError("run", fit_backend.status());
+  }
+  options.fit_backend = fit_backend->backend;
+  options.fit_device = device;
+  options.fit_backend_choice = fit_backend->choice;
   auto summary = RunPipeline(capture, out, options);
   if (!summary.ok()) return ReportError("run", summary.status());
   std::printf("reflcap run: %s\n", PipelineSummaryLine(*summary).c_str());

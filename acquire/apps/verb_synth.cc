@@ -116,7 +116,12 @@ int RunDemo(int argc, char** argv) {
   PrintSummary(*summary, fs::path(out) / "capture");
   std::printf("reflcap demo: 2/2 resample (train) -> fit -> render (holdout) -> validate\n");
   std::fflush(stdout);
-  auto pipeline = RunPipeline(staging->path() / "capture", staging->path() / "run", PipelineOptions{});
+  PipelineOptions pipeline_options;  // the fit backend as --backend auto picks it
+  auto fit_backend = ResolveFitBackend("auto", "");
+  if (!fit_backend.ok()) return ReportError("demo", fit_backend.status());
+  pipeline_options.fit_backend = fit_backend->backend;
+  pipeline_options.fit_backend_choice = fit_backend->choice;
+  auto pipeline = RunPipeline(staging->path() / "capture", staging->path() / "run", pipeline_options);
   if (!pipeline.ok()) return ReportError("demo", pipeline.status());
   if (Status s = WriteTextFileAtomic(staging->path() / ".reflcap-demo", "reflcap demo output\n"); !s.ok()) {
     return ReportError("demo", s);

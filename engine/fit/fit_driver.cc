@@ -56,10 +56,12 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, int lobes,
 }
 
 StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
-                               const FitOptions& options, bool overwrite) {
+                               const FitOptions& options, bool overwrite, const std::string& device,
+                               const std::string& backend_choice) {
   const auto start = std::chrono::steady_clock::now();
   REFLCAP_RETURN_IF_ERROR(options.Validate());
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter, CreateFitter(backend, options.threads));
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter,
+                           CreateFitter(backend, options.threads, device));
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
   const SampleStoreInfo& info = store->info();
   REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
@@ -171,6 +173,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"fits_per_second", summary.fits_per_second},
       {"texels_per_second", fit_seconds > 0 ? info.texels / fit_seconds : 0.0},
   };
+  if (!backend_choice.empty()) report["backend_choice"] = backend_choice;
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);
   report["timings_s"] = {{"read_wait", read_seconds},

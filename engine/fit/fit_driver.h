@@ -1,7 +1,7 @@
 #pragma once
 // `reflcap fit` as a library call: stream a sample store's chunks through a Fitter (reading the
-// next chunk while the current one is fitted, so at most two chunks are in memory) and write the
-// FIT folder:
+// next chunk on a thread while the current one is fitted — double buffering, so disk reads
+// overlap the CPU or GPU work and at most two chunks are in memory) and write the FIT folder:
 //   FIT/params.exr       BrdfMaps (engine/texel/brdf_maps.h channel names), atlas layout
 //   FIT/sigma.exr        the same channels, each parameter's standard deviation (-1 = unknown)
 //   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
@@ -30,11 +30,17 @@ struct FitRunSummary {
 };
 
 // Reads SAMPLES, fits with `backend`, writes FIT (refused when it exists non-empty, unless
-// overwrite). Errors: NotFound/DataLoss from the store, Unavailable for a backend this build or
-// machine lacks, InvalidArgument for bad options.
+// overwrite). `device` chooses the Vulkan device (kVulkan; "" = automatic, else an index or a
+// name substring); `backend_choice`, when given, is written to fit_report.json as the reason for
+// the backend (`--backend auto`). The report's "device" is Fitter::device() (for kVulkan the
+// device's name and driver). Errors: NotFound/DataLoss from the store, Unavailable for a
+// backend this build or machine lacks, NotFound when `device` matches no device,
+// InvalidArgument for bad options.
 StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
                                const std::filesystem::path& out, Backend backend,
-                               const FitOptions& options, bool overwrite);
+                               const FitOptions& options, bool overwrite,
+                               const std::string& device = "",
+                               const std::string& backend_choice = "");
 
 // Writes params.exr, sigma.exr and status.exr for per-texel fits in `atlas` layout into `dir`.
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, int lobes,

@@ -6,6 +6,7 @@
 
 #include "engine/core/parallel.h"
 #include "engine/fit/fitter_base.h"
+#include "engine/fit/vulkan_fitter.h"
 
 namespace reflcap::fit {
 
@@ -147,9 +148,7 @@ namespace internal {
 
 int FitterBase::threads() const { return threads_ > 0 ? threads_ : HardwareThreads(); }
 
-Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
-                       std::vector<TexelFit>* results) {
-  REFLCAP_RETURN_IF_ERROR(options.Validate());
+Status ValidateChunk(const TexelSampleChunk& chunk) {
   const uint32_t texels = chunk.texel_count;
   if (chunk.offsets.size() != size_t(texels) + 1 || chunk.offsets[0] != 0 ||
       chunk.offsets[texels] != chunk.samples.size()) {
@@ -162,6 +161,14 @@ Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
                                   ": offsets decrease at texel ", t);
     }
   }
+  return OkStatus();
+}
+
+Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
+                       std::vector<TexelFit>* results) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_RETURN_IF_ERROR(ValidateChunk(chunk));
+  const uint32_t texels = chunk.texel_count;
   const ProblemLayout layout{options.lobe_model, options.lobes};
   const LmSettings settings = MakeLmSettings(options);
   const int workers = options.threads > 0 ? options.threads : threads();
@@ -236,13 +243,18 @@ std::unique_ptr<Fitter> CreateScalarFitter(bool use_double, int threads) {
   return std::make_unique<internal::ScalarFitter>(use_double, threads);
 }
 
-StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads) {
+StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads,
+                                               const std::string& device) {
   switch (backend) {
     case Backend::kCpu: return internal::CreateBatchedFitter(threads);
     case Backend::kCeres: return internal::CreateCeresFitter(threads);
-    case Backend::kVulkan:
-      return UnavailableError("--backend vulkan: the Vulkan fitter is not available until the "
-                              "Vulkan fitting issue lands; use --backend cpu");
+    case Backend::kVulkan: {
+      VulkanFitterOptions options;
+      options.device = device;
+      options.threads = threads;
+      REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<VulkanFitter> fitter, CreateVulkanFitter(options));
+      return std::unique_ptr<Fitter>(std::move(fitter));
+    }
   }
   return InvalidArgumentError("unknown backend");
 }

@@ -12,8 +12,9 @@
 //   kCeres  the reference (engine/fit/ceres_fitter.cc): one small ceres::Problem per fitting
 //           problem, automatic derivatives, same model, bounds, start and stages. For
 //           cross-checks and as the benchmarks' baseline.
-//   kVulkan the GPU path: the same LM as kCpu, constants in shaders/shared/fit_status.h.
-//           Unavailable until its issue lands.
+//   kVulkan the GPU path (engine/fit/vulkan_fitter.h): kCpu's algorithm with the LM on a Vulkan
+//           device (shaders/fit/lm_fit.comp; constants in shaders/shared/fit_status.h),
+//           preparation and post-processing on the CPU. Unavailable without Vulkan.
 // CreateScalarFitter gives the readable one-problem-at-a-time path in float or double
 // (engine/fit/lm.h), which the batched path must match.
 #include <array>
@@ -149,8 +150,11 @@ class Fitter {
                      std::vector<TexelFit>* results) = 0;
 };
 
-// kCpu, kCeres; kVulkan is Unavailable until the Vulkan fitting issue lands. threads: 0 = all.
-StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads = 0);
+// threads: CPU worker threads, 0 = all. device (kVulkan only): "" = automatic choice, an index
+// or a name substring (VulkanFitterOptions::device). kVulkan is Unavailable when this build or
+// machine has no Vulkan device (vulkan_fitter.h says how `--backend auto` decides).
+StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads = 0,
+                                               const std::string& device = "");
 // The scalar reference path (lm.h) in double or float, one problem at a time per thread.
 std::unique_ptr<Fitter> CreateScalarFitter(bool use_double, int threads = 0);
 

@@ -16,6 +16,10 @@ namespace reflcap::fit::internal {
 // enough that 2 workers balance on small chunks.
 constexpr int kTexelsPerTask = 256;
 
+// InvalidArgument unless chunk.offsets describe chunk.samples (texel_count + 1 non-decreasing
+// entries from 0 to samples.size()); every backend checks this before fitting.
+Status ValidateChunk(const TexelSampleChunk& chunk);
+
 class FitterBase : public Fitter {
  public:
   explicit FitterBase(int threads) : threads_(threads) {}

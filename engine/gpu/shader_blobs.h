@@ -17,6 +17,18 @@ enum class ShaderId {
   kChunkProbe,          // shaders/probe/chunk_probe.comp: in-place transform of a bound chunk
   kBenchEmpty,          // shaders/bench/empty.comp: empty kernel (dispatch overhead)
   kBenchMadThroughput,  // shaders/bench/mad_throughput.comp: float multiply-add throughput
+  kLmFitAnisoK0,        // shaders/fit/lm_fit.comp, aniso, K = 0: the Vulkan fitter's LM
+  kLmFitAnisoK1,        //   (one permutation per lobe model and lobe count)
+  kLmFitAnisoK2,
+  kLmFitAnisoK3,
+  kLmFitIsoK0,
+  kLmFitIsoK1,
+  kLmFitIsoK2,
+  kLmFitIsoK3,
+  kLmFitSharedK0,
+  kLmFitSharedK1,
+  kLmFitSharedK2,
+  kFitProbe,            // shaders/fit/fit_probe.comp: the fitting model's GLSL twins
   kRenderSurfaceVert,      // shaders/render/surface.vert: camera pass, vertex pulling
   kRenderSurfaceFrag,      // shaders/render/surface.frag: camera pass, per-fragment shading
   kRenderVisibilityFrag,   // shaders/render/visibility.frag: triangle ids (distorted cameras)

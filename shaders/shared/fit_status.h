@@ -1,6 +1,7 @@
 // Per-texel fit status codes and the Levenberg–Marquardt constants that the CPU fitters
-// (engine/fit/lm.h, engine/fit/batched_kernel.cc) and the Vulkan fitter (next issue,
-// shaders/fit/*.comp) must share bit for bit, so that every backend damps, stops and clamps alike.
+// (engine/fit/lm.h, engine/fit/batched_kernel.cc) and the Vulkan fitter (shaders/fit/lm_fit.comp,
+// shaders/fit/fit_model.glsl) share bit for bit, so that every backend damps, stops and clamps
+// alike.
 // engine/fit/fitter.h turns the codes into `enum class FitStatus`; engine/fit/lm.h reads the
 // constants. tests/engine/fit/fit_model_test.cc static_asserts that the C++ side uses these values.
 //

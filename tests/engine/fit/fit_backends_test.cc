@@ -26,37 +26,7 @@ std::vector<TexelFit> RunBackend(Backend backend, const TexelSampleChunk& chunk,
   return RunFitter(**fitter, chunk, o);
 }
 
-// Visits every parameter slot of two fits with its standard deviation in `a`.
-template <typename Fn>
-void ForEachSlot(const TexelFit& a, const TexelFit& b, Fn fn) {
-  for (int c = 0; c < 3; ++c) {
-    fn(a.params.rho_d[c], b.params.rho_d[c], a.sigma.rho_d[c]);
-    for (int k = 0; k < a.params.num_lobes; ++k) {
-      const brdf::LobeParams &la = a.params.lobes[k][c], &lb = b.params.lobes[k][c], &s = a.sigma.lobes[k][c];
-      fn(la.cx, lb.cx, s.cx);
-      fn(la.cy, lb.cy, s.cy);
-      fn(la.cz, lb.cz, s.cz);
-      fn(la.n, lb.n, s.n);
-    }
-  }
-}
-
-// Counts the well-conditioned slots of converged texels where a and b differ by more than
-// `tolerance` relative. Well-conditioned: the fit determines the slot to 1 % (sigma < 1e-2 |v|),
-// so a difference there is the solvers', not the data's.
-int CountDisagreements(const std::vector<TexelFit>& a, const std::vector<TexelFit>& b,
-                       double tolerance, int* compared) {
-  int bad = 0;
-  for (size_t t = 0; t < a.size(); ++t) {
-    if (a[t].status != FitStatus::kConverged || b[t].status != FitStatus::kConverged) continue;
-    ForEachSlot(a[t], b[t], [&](double va, double vb, double sigma) {
-      if (!(sigma >= 0) || sigma > 1e-2 * std::abs(va)) return;
-      ++*compared;
-      if (std::abs(va - vb) > tolerance * std::max(std::abs(vb), 1e-6)) ++bad;
-    });
-  }
-  return bad;
-}
+using testing::CountDisagreements;
 
 TEST(FitBackends, CeresAndBatchedCpuAgreeOnConvergedWellConditionedTexels) {
   // The bar: 1e-3 relative. Both stop at a relative step of 1e-6; the batched path's

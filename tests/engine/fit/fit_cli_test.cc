@@ -1,6 +1,8 @@
 // `reflcap fit` end to end: a small sample store written with the store API from synthetic
-// ground truth → the executable → FIT/params.exr, sigma.exr, status.exr, fit_report.json; and
-// its exit codes for usage errors (1), bad input (2) and the unavailable Vulkan backend (3).
+// ground truth → the executable → FIT/params.exr, sigma.exr, status.exr, fit_report.json; its
+// exit codes for usage errors (1), bad input (2) and the unavailable Vulkan backend (3, on a
+// machine without a Vulkan driver, which the test makes by pointing the loader nowhere); and,
+// in builds with Vulkan, `--backend vulkan` against the CPU backend on the same store.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -30,10 +32,16 @@ struct CliResult {
   std::string out, err;
 };
 
-CliResult RunCli(const std::string& args, const reflcap::testing::ScratchDir& dir) {
+// Environment prefix under which the Vulkan loader finds no driver (no ICD): a machine without
+// any Vulkan device, as tests/engine/gpu/context_test.cc makes it.
+constexpr const char* kNoVulkan =
+    "VK_DRIVER_FILES=/nonexistent/reflcap_no_icd.json VK_ICD_FILENAMES=/nonexistent/reflcap_no_icd.json ";
+
+CliResult RunCli(const std::string& args, const reflcap::testing::ScratchDir& dir,
+                 const std::string& env = "") {
   const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command = std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() +
-                              " 2>" + err.string();
+  const std::string command = env + std::string(REFLCAP_BINARY) + " " + args + " >" +
+                              out.string() + " 2>" + err.string();
   const int status = std::system(command.c_str());
   CliResult r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -100,7 +108,10 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   auto text = ReadTextFile(out / "fit_report.json");
   ASSERT_TRUE(text.ok());
   const Json report = Json::parse(*text);
-  EXPECT_EQ(report["backend"], "cpu");
+  // --backend auto: the CPU on a machine whose only Vulkan device is lavapipe (or none), a GPU
+  // otherwise; the report says which and why.
+  EXPECT_TRUE(report["backend"] == "cpu" || report["backend"] == "vulkan") << report["backend"];
+  EXPECT_NE(report["backend_choice"].get<std::string>().find("auto"), std::string::npos);
   EXPECT_EQ(report["texels"], kTexels);
   EXPECT_EQ(report["status_counts"]["converged"], kTexels);
   EXPECT_GT(report["fits_per_second"].get<double>(), 0);
@@ -131,10 +142,20 @@ TEST(FitCli, ExitCodes) {
   const CliResult missing = RunCli("fit " + (dir / "nothing").string() + " --out " + (dir / "o").string(), dir);
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_NE(missing.err.find("store.json"), std::string::npos) << missing.err;
-  const CliResult vulkan = RunCli("fit " + samples + " --out " + (dir / "v").string() + " --backend vulkan", dir);
-  EXPECT_EQ(vulkan.exit_code, 3);
+  // Without any Vulkan driver: --backend vulkan is unavailable (3) with a message naming Vulkan,
+  // and auto falls back to the CPU with a warning.
+  const CliResult vulkan =
+      RunCli("fit " + samples + " --out " + (dir / "v").string() + " --backend vulkan", dir, kNoVulkan);
+  EXPECT_EQ(vulkan.exit_code, 3) << vulkan.err;
   EXPECT_NE(vulkan.err.find("Vulkan"), std::string::npos) << vulkan.err;
   EXPECT_FALSE(fs::exists(dir / "v"));
+  const CliResult fallback =
+      RunCli("fit " + samples + " --out " + (dir / "a").string() + " --backend auto", dir, kNoVulkan);
+  EXPECT_EQ(fallback.exit_code, 0) << fallback.err;
+  EXPECT_NE(fallback.err.find("fitting on the CPU"), std::string::npos) << fallback.err;
+  EXPECT_EQ(Json::parse(ReadTextFile(dir / "a" / "fit_report.json").value())["backend"], "cpu");
+  EXPECT_EQ(RunCli("fit " + samples + " --out x --backend gpu", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("fit " + samples + " --out x --backend cpu --device 0", dir).exit_code, 1);
   // A corrupted chunk is bad input, and nothing is left behind.
   {
     std::FILE* f = std::fopen((dir / "samples" / SampleChunkFileName(1)).c_str(), "r+b");
@@ -147,6 +168,52 @@ TEST(FitCli, ExitCodes) {
   EXPECT_EQ(corrupt.exit_code, 2) << corrupt.err;
   EXPECT_FALSE(fs::exists(dir / "c"));
 }
+
+#ifdef REFLCAP_HAVE_VULKAN_FITTER
+// --backend vulkan on the machine's Vulkan device (lavapipe in CI): the same outputs as the CPU
+// backend, the device's name in the report.
+TEST(FitCli, VulkanBackendMatchesTheCpuBackend) {
+  reflcap::testing::ScratchDir dir;
+  const std::vector<brdf::BrdfParams> truth = WriteStore(dir / "samples");
+  const std::string samples = (dir / "samples").string();
+  const CliResult cpu = RunCli("fit " + samples + " --out " + (dir / "cpu").string() + " --backend cpu", dir);
+  ASSERT_EQ(cpu.exit_code, 0) << cpu.err;
+  const CliResult gpu = RunCli("fit " + samples + " --out " + (dir / "gpu").string() + " --backend vulkan", dir);
+  if (gpu.exit_code == 3 && gpu.err.find("no Vulkan driver") != std::string::npos) {
+    GTEST_SKIP() << "no Vulkan driver or device on this machine: " << gpu.err;
+  }
+  ASSERT_EQ(gpu.exit_code, 0) << gpu.err;
+  EXPECT_NE(gpu.out.find("vulkan"), std::string::npos) << gpu.out;
+  const Json cpu_report = Json::parse(ReadTextFile(dir / "cpu" / "fit_report.json").value());
+  const Json gpu_report = Json::parse(ReadTextFile(dir / "gpu" / "fit_report.json").value());
+  EXPECT_EQ(gpu_report["backend"], "vulkan");
+  EXPECT_FALSE(gpu_report["device"].get<std::string>().empty());
+  EXPECT_EQ(gpu_report["status_counts"], cpu_report["status_counts"]);
+  EXPECT_EQ(gpu_report["texels"], kTexels);
+
+  TexelAtlas atlas;
+  atlas.width = atlas.height = kAtlasSize;
+  for (uint32_t t = 0; t < kTexels; ++t) atlas.pixel_of_texel.push_back(1 + t);
+  auto cpu_params = ReadBrdfMaps(dir / "cpu" / "params.exr", atlas);
+  auto gpu_params = ReadBrdfMaps(dir / "gpu" / "params.exr", atlas);
+  ASSERT_TRUE(cpu_params.ok() && gpu_params.ok());
+  // Every texel of this store is converged and well determined: the 1e-3 bar.
+  for (uint32_t t = 0; t < kTexels; ++t) {
+    const brdf::BrdfParams &a = cpu_params->texels[t], &b = gpu_params->texels[t];
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(b.rho_d[c], a.rho_d[c], 1e-3 * std::abs(a.rho_d[c]) + 1e-7) << t;
+      if (truth[t].num_lobes > 0 && a.lobes[0][c].n > 0) {
+        EXPECT_NEAR(b.lobes[0][c].n, a.lobes[0][c].n, 1e-3 * a.lobes[0][c].n) << t;
+      }
+    }
+  }
+  // A device that does not exist is refused, naming it.
+  const CliResult missing = RunCli("fit " + samples + " --out " + (dir / "m").string() +
+                                       " --backend vulkan --device no-such-gpu", dir);
+  EXPECT_NE(missing.exit_code, 0);
+  EXPECT_NE(missing.err.find("no-such-gpu"), std::string::npos) << missing.err;
+}
+#endif  // REFLCAP_HAVE_VULKAN_FITTER
 
 }  // namespace
 }  // namespace reflcap::fit

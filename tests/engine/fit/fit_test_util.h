@@ -58,6 +58,46 @@ inline RecoveryErrors Compare(const std::vector<brdf::BrdfParams>& truth,
   return e;
 }
 
+// Visits every parameter slot of two fits with its standard deviation in `a`.
+template <typename Fn>
+void ForEachSlot(const TexelFit& a, const TexelFit& b, Fn fn) {
+  for (int c = 0; c < 3; ++c) {
+    fn(a.params.rho_d[c], b.params.rho_d[c], a.sigma.rho_d[c]);
+    for (int k = 0; k < a.params.num_lobes; ++k) {
+      const brdf::LobeParams &la = a.params.lobes[k][c], &lb = b.params.lobes[k][c], &s = a.sigma.lobes[k][c];
+      fn(la.cx, lb.cx, s.cx);
+      fn(la.cy, lb.cy, s.cy);
+      fn(la.cz, lb.cz, s.cz);
+      fn(la.n, lb.n, s.n);
+    }
+  }
+}
+
+// Well-conditioned slot: the fit determines it to 1 % (sigma < 1e-2 |v|), so a difference there
+// is the solvers', not the data's.
+inline bool WellConditioned(double value, double sigma) {
+  return sigma >= 0 && sigma <= 1e-2 * std::abs(value);
+}
+
+// Counts the well-conditioned slots of texels converged in both a and b where a and b differ by
+// more than `tolerance` relative (*compared: how many slots were compared; *max_relative, when
+// given: the largest relative difference among them).
+inline int CountDisagreements(const std::vector<TexelFit>& a, const std::vector<TexelFit>& b,
+                              double tolerance, int* compared, double* max_relative = nullptr) {
+  int bad = 0;
+  for (size_t t = 0; t < a.size(); ++t) {
+    if (a[t].status != FitStatus::kConverged || b[t].status != FitStatus::kConverged) continue;
+    ForEachSlot(a[t], b[t], [&](double va, double vb, double sigma) {
+      if (!WellConditioned(va, sigma)) return;
+      ++*compared;
+      const double relative = std::abs(va - vb) / std::max(std::abs(vb), 1e-6);
+      if (max_relative) *max_relative = std::max(*max_relative, relative);
+      if (relative > tolerance) ++bad;
+    });
+  }
+  return bad;
+}
+
 inline std::string CountsString(const std::array<int, kFitStatusCount>& counts) {
   std::string s;
   for (int i = 0; i < kFitStatusCount; ++i) {

@@ -1,0 +1,595 @@
+// The Vulkan fitter (vulkan_fitter.h): batches of prepared problems, their device buffers, and
+// the dispatch loop that runs shaders/fit/lm_fit.comp until every problem's LM has ended.
+//
+// Data layout (shaders/shared/fit_gpu.h has the word layouts):
+//   records  one slot per residual, each problem's residuals contiguous: the store is CSR by
+//            texel and a lane reads its problem's slots in order. Texel t of a batch owns
+//            3 x samples(t) slots (its problems' residuals never exceed that). On the device two
+//            uniform texel buffers, (xx, yy, zz, y) as RGBA32F and sqrt(w) as R32F (lm_fit.comp
+//            says why texel buffers); on the host five sections (xx, yy, zz, y, sqrt(w)) that
+//            back the prepared problems' ResidualViews, which FinishProblem reads (its
+//            Lambert-only fallback refits rho from them), so they live until the batch is
+//            finished, plus the interleaved RGBA copy for the upload.
+//   desc     per problem: first record, channel blocks, stages, masks, loss scale, x0.
+//   queue    device problems sorted by residual count, largest first: lanes in lock-step
+//            (lavapipe runs 8 invocations as one SIMD subgroup) then take problems of similar
+//            size, and the sample loop of a subgroup does not idle lanes on short problems.
+//   lanes    per persistent lane, the LM state of its current problem between dispatches.
+//   results  per problem: status, free mask, iterations, cost, x, J^T J at x.
+#include "engine/fit/vulkan_fitter.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <future>
+#include <map>
+#include <vector>
+
+#include "engine/core/log.h"
+#include "engine/core/parallel.h"
+#include "engine/fit/fitter_base.h"
+#include "engine/fit/problem.h"
+#include "engine/fit/vulkan_fit_kernel.h"
+#include "engine/gpu/chunking.h"
+#include "engine/gpu/device_info.h"
+#include "engine/gpu/shader_blobs.h"
+#include "engine/gpu/vk_buffer.h"
+#include "engine/gpu/vk_commands.h"
+#include "engine/gpu/vk_context.h"
+#include "shaders/shared/fit_gpu.h"
+
+namespace reflcap::fit {
+namespace {
+
+namespace sh = gpu::shared;
+
+// Batch limits (VulkanFitterOptions: 0 = these). 32,768 problems: enough lanes to fill a GPU,
+// and two host batches of at most ~100 MB (prepared + solved problems, records).
+constexpr uint32_t kDefaultBatchProblems = 1u << 15;
+constexpr uint64_t kDefaultBatchResiduals = uint64_t{1} << 21;  // 40 MiB of records
+// Persistent lanes: a CPU device runs a few workgroups at a time (one per thread), so a few
+// thousand lanes keep it busy; a GPU needs tens of thousands in flight.
+constexpr uint32_t kSoftwareLanes = 4096;
+constexpr uint32_t kGpuLanes = 65536;
+constexpr uint32_t kLocalSize = 64;
+// Loop steps kept back from the device's loop budget for loops a driver compiler might add
+// (lm_fit.comp has exactly two: ticks and samples; fit_vulkan_test.cc checks its SPIR-V).
+constexpr uint32_t kLoopReserve = 32;
+// Residual evaluations per submission at most (lanes x ticks x residuals): ~7 GFLOP, a few
+// milliseconds on a GPU, well under a second on lavapipe, so no submission approaches a
+// desktop driver's watchdog (~2 s).
+constexpr uint64_t kMaxResidualEvaluationsPerSubmit = uint64_t{1} << 26;
+// Texels per ParallelFor task in preparation and post-processing.
+constexpr int64_t kTexelsPerTask = 64;
+
+enum Route : uint8_t { kRouteTrivial = 0, kRouteDevice = 1, kRouteCpu = 2 };
+
+gpu::ShaderId LmShader(const ProblemLayout& layout) {
+  static constexpr gpu::ShaderId kAniso[] = {gpu::ShaderId::kLmFitAnisoK0, gpu::ShaderId::kLmFitAnisoK1,
+                                             gpu::ShaderId::kLmFitAnisoK2, gpu::ShaderId::kLmFitAnisoK3};
+  static constexpr gpu::ShaderId kIso[] = {gpu::ShaderId::kLmFitIsoK0, gpu::ShaderId::kLmFitIsoK1,
+                                           gpu::ShaderId::kLmFitIsoK2, gpu::ShaderId::kLmFitIsoK3};
+  static constexpr gpu::ShaderId kShared[] = {gpu::ShaderId::kLmFitSharedK0, gpu::ShaderId::kLmFitSharedK1,
+                                              gpu::ShaderId::kLmFitSharedK2};
+  switch (layout.model) {
+    case LobeModel::kAniso: return kAniso[layout.lobes];
+    case LobeModel::kIso: return kIso[layout.lobes];
+    case LobeModel::kShared: return kShared[layout.lobes];
+  }
+  return gpu::ShaderId::kCount;
+}
+
+uint32_t FloatBits(float v) {
+  uint32_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  return bits;
+}
+float BitsFloat(uint32_t bits) {
+  float v;
+  std::memcpy(&v, &bits, sizeof v);
+  return v;
+}
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// One batch of consecutive texels of a chunk, on the host.
+struct Batch {
+  uint32_t begin = 0, end = 0;            // chunk texels [begin, end)
+  std::vector<uint64_t> slot;             // first record slot of each texel (batch-local)
+  std::vector<PreparedProblem> problems;  // (end - begin) x ProblemsPerTexel
+  std::vector<SolvedProblem> solved;      // filled for kRouteTrivial / kRouteCpu problems
+  std::vector<uint8_t> route;
+  std::vector<float> records;             // 5 sections of slot.back() floats (see the top)
+  std::vector<float> rgba;                // (xx, yy, zz, y) per slot, for the device
+  std::vector<uint32_t> desc;
+  std::vector<uint32_t> queue;
+  std::vector<uint32_t> results;          // downloaded results (OUT_STRIDE words per problem)
+  uint32_t max_residuals = 0;             // over the queue
+  // What the device run did.
+  uint32_t dispatches = 0, ticks = 0, lanes = 0;
+  uint64_t evaluations = 0;  // residual evaluations on the device
+  double device_seconds = 0;
+};
+
+class VulkanFitterImpl final : public VulkanFitter {
+ public:
+  VulkanFitterImpl(std::unique_ptr<gpu::VkContext> ctx, gpu::CommandBuffer cmd,
+                   std::unique_ptr<internal::LmKernels> kernels, const VulkanFitterOptions& options)
+      : ctx_(std::move(ctx)), cmd_(std::move(cmd)), kernels_(std::move(kernels)), options_(options) {}
+
+  Backend backend() const override { return Backend::kVulkan; }
+  std::string device() const override { return ctx_->info().ToString(); }
+  const VulkanFitStats& last_stats() const override { return stats_; }
+  const std::string& device_name() const override { return ctx_->info().name; }
+  bool software_device() const override { return ctx_->info().IsSoftware(); }
+
+  Status Fit(const TexelSampleChunk& chunk, const FitOptions& options,
+             std::vector<TexelFit>* results) override;
+
+ private:
+  struct Plan {
+    ProblemLayout layout;
+    int per_texel = 1;
+    int num_params = 1;
+    LmSettings settings;
+    int workers = 1;
+    uint32_t max_problems = 0;     // per batch
+    uint64_t max_records = 0;      // per batch
+    uint32_t max_device_residuals = 0;  // per problem
+    uint32_t lane_cap = 0;
+  };
+
+  // Texel ranges of the chunk's batches.
+  std::vector<std::pair<uint32_t, uint32_t>> CutBatches(const TexelSampleChunk& chunk,
+                                                        const Plan& plan) const;
+  void Prepare(const TexelSampleChunk& chunk, const FitOptions& options, const Plan& plan,
+               uint32_t begin, uint32_t end, Batch* b);
+  Status RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b);
+  void Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results);
+  Status Ensure(gpu::Buffer* buffer, uint64_t bytes);
+
+  std::unique_ptr<gpu::VkContext> ctx_;
+  gpu::CommandBuffer cmd_;
+  std::unique_ptr<internal::LmKernels> kernels_;
+  VulkanFitterOptions options_;
+  std::vector<ProblemArena> arenas_;
+  Batch batches_[2];
+  struct {
+    gpu::Buffer settings, desc, queue, lanes, results, control;
+    internal::TexelBuffer records, weights;
+  } buffers_;
+  VulkanFitStats stats_;
+};
+
+std::vector<std::pair<uint32_t, uint32_t>> VulkanFitterImpl::CutBatches(
+    const TexelSampleChunk& chunk, const Plan& plan) const {
+  std::vector<std::pair<uint32_t, uint32_t>> out;
+  uint32_t begin = 0;
+  uint64_t records = 0;
+  for (uint32_t t = 0; t < chunk.texel_count; ++t) {
+    const uint64_t slots = 3 * chunk.SampleCount(t);
+    const uint64_t problems = uint64_t(t - begin + 1) * plan.per_texel;
+    if (t > begin && (problems > plan.max_problems || records + slots > plan.max_records)) {
+      out.emplace_back(begin, t);
+      begin = t;
+      records = 0;
+    }
+    records += slots;
+  }
+  if (chunk.texel_count > begin) out.emplace_back(begin, chunk.texel_count);
+  return out;
+}
+
+void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& options,
+                               const Plan& plan, uint32_t begin, uint32_t end, Batch* b) {
+  const int per_texel = plan.per_texel;
+  const int P = plan.num_params;
+  const int desc_stride = REFLCAP_FIT_DESC_STRIDE(P);
+  const uint32_t texels = end - begin;
+  const size_t problems = size_t(texels) * per_texel;
+  b->begin = begin;
+  b->end = end;
+  b->slot.resize(texels + 1);
+  b->slot[0] = 0;
+  for (uint32_t t = 0; t < texels; ++t) b->slot[t + 1] = b->slot[t] + 3 * chunk.SampleCount(begin + t);
+  b->problems.resize(problems);
+  b->solved.resize(problems);
+  b->route.assign(problems, kRouteTrivial);
+  const uint64_t section = std::max<uint64_t>(1, b->slot[texels]);
+  b->records.resize(section * REFLCAP_FIT_RECORD_FLOATS);
+  b->rgba.resize(section * 4);
+  float* const section_of[REFLCAP_FIT_RECORD_FLOATS] = {
+      b->records.data(), b->records.data() + section, b->records.data() + 2 * section,
+      b->records.data() + 3 * section, b->records.data() + 4 * section};
+  b->desc.resize(problems * desc_stride);
+
+  ParallelFor(
+      0, texels, kTexelsPerTask,
+      [&](int64_t t0, int64_t t1, int worker) {
+        ProblemArena& arena = arenas_[worker];
+        for (int64_t t = t0; t < t1; ++t) {
+          const uint32_t texel = begin + uint32_t(t);
+          size_t cursor = 0;
+          PreparedProblem* q = &b->problems[size_t(t) * per_texel];
+          PrepareTexel(options, plan.layout, chunk.SamplesOf(texel), chunk.SampleCount(texel),
+                       int(texel), &arena, &cursor, q);
+          // A texel larger than a whole batch (alone in its batch, CutBatches) stays on the CPU.
+          const bool fits_a_batch = b->slot[t + 1] - b->slot[t] <= plan.max_records;
+          for (int p = 0; p < per_texel; ++p) {
+            const size_t i = size_t(t) * per_texel + p;
+            PreparedProblem& problem = q[p];
+            ResidualView& view = problem.residuals;
+            const int count = view.count();
+            // The residuals move from the worker's arena (reused by the next texel) to the
+            // batch's sections, which outlive FinishProblem.
+            const uint64_t first = b->slot[t] + uint64_t(view.xx - arena.xx.data());
+            const float* from[REFLCAP_FIT_RECORD_FLOATS] = {view.xx, view.yy, view.zz, view.y,
+                                                            view.sw};
+            for (int k = 0; k < REFLCAP_FIT_RECORD_FLOATS; ++k) {
+              std::copy(from[k], from[k] + count, section_of[k] + first);
+            }
+            if (problem.num_stages == 0) {
+              // As the batched path: nothing to solve, the start is the answer.
+              SolvedProblem& out = b->solved[i];
+              out = SolvedProblem{};
+              for (int j = 0; j < kMaxParams; ++j) out.x[j] = problem.x0[j];
+              out.status = FitStatus::kConverged;
+              b->route[i] = kRouteTrivial;
+            } else if (!fits_a_batch || count > int(plan.max_device_residuals)) {
+              // Too large for one invocation's loop budget (or for a batch): the scalar float
+              // LM of lm.h, which takes the same decisions, while the arena holds the residuals.
+              b->solved[i] = SolveScalar<float>(problem, plan.settings, options.loss);
+              b->route[i] = kRouteCpu;
+            } else {
+              float* rgba = &b->rgba[first * 4];
+              for (int r = 0; r < count; ++r, rgba += 4) {
+                rgba[0] = view.xx[r];
+                rgba[1] = view.yy[r];
+                rgba[2] = view.zz[r];
+                rgba[3] = view.y[r];
+              }
+              uint32_t* d = &b->desc[i * desc_stride];
+              d[sh::kFitDescBegin] = uint32_t(first);
+              d[sh::kFitDescBlock1] = uint32_t(view.begin[1]);
+              d[sh::kFitDescBlock2] = uint32_t(view.begin[2]);
+              d[sh::kFitDescCount] = uint32_t(count);
+              d[sh::kFitDescStages] = uint32_t(problem.num_stages);
+              d[sh::kFitDescMask0] = problem.stage_mask[0];
+              d[sh::kFitDescMask1] = problem.stage_mask[1];
+              d[sh::kFitDescLossScale] = FloatBits(float(problem.loss_scale));
+              for (int j = 0; j < P; ++j) d[sh::kFitDescX0 + j] = FloatBits(float(problem.x0[j]));
+              b->route[i] = kRouteDevice;
+            }
+            view.xx = section_of[0] + first;
+            view.yy = section_of[1] + first;
+            view.zz = section_of[2] + first;
+            view.y = section_of[3] + first;
+            view.sw = section_of[4] + first;
+          }
+        }
+      },
+      plan.workers);
+
+  b->queue.clear();
+  for (size_t i = 0; i < problems; ++i) {
+    if (b->route[i] == kRouteDevice) b->queue.push_back(uint32_t(i));
+  }
+  std::stable_sort(b->queue.begin(), b->queue.end(), [&](uint32_t a, uint32_t c) {
+    return b->problems[a].residuals.count() > b->problems[c].residuals.count();
+  });
+  b->max_residuals = b->queue.empty() ? 0 : uint32_t(b->problems[b->queue[0]].residuals.count());
+}
+
+Status VulkanFitterImpl::Ensure(gpu::Buffer* buffer, uint64_t bytes) {
+  bytes = std::max<uint64_t>(bytes, 16);
+  if (buffer->handle() != VK_NULL_HANDLE && buffer->size() >= bytes) return OkStatus();
+  // Room to grow by a quarter, so that batches of slightly different sizes reuse the buffer.
+  const uint64_t want = std::min<uint64_t>(bytes + bytes / 4, ctx_->max_allocation_bytes());
+  REFLCAP_ASSIGN_OR_RETURN(*buffer, gpu::Buffer::Create(*ctx_, std::max(want, bytes),
+                                                        gpu::MemoryKind::kDevice));
+  return OkStatus();
+}
+
+Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b) {
+  const auto start = std::chrono::steady_clock::now();
+  b->dispatches = b->ticks = b->lanes = 0;
+  b->evaluations = 0;
+  if (b->queue.empty()) return OkStatus();
+  const int P = plan.num_params;
+  const uint64_t problems = b->problems.size();
+  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
+  const uint64_t queue_bytes = b->queue.size() * 4;
+  const uint64_t slots = std::max<uint64_t>(1, b->slot.back());
+  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
+  const uint32_t lanes = std::min<uint32_t>(uint32_t(b->queue.size()), plan.lane_cap);
+  const uint64_t lane_bytes = uint64_t(lanes) * REFLCAP_FIT_LANE_STRIDE(P) * 4;
+  const uint64_t range = ctx_->info().max_storage_buffer_range;
+  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, lane_bytes}) {
+    if (bytes > range) {
+      return InternalError("Vulkan fitter: a batch binding of ", bytes,
+                           " bytes exceeds maxStorageBufferRange (", range, ")");
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
+  if (buffers_.records.elements() < slots) {
+    // Room to grow by a quarter, as Ensure.
+    const uint64_t want = std::min<uint64_t>(slots + slots / 4, plan.max_records);
+    REFLCAP_ASSIGN_OR_RETURN(buffers_.records, internal::TexelBuffer::Create(
+                                                   *ctx_, std::max(want, slots),
+                                                   VK_FORMAT_R32G32B32A32_SFLOAT, 16));
+    REFLCAP_ASSIGN_OR_RETURN(buffers_.weights, internal::TexelBuffer::Create(
+                                                   *ctx_, std::max(want, slots),
+                                                   VK_FORMAT_R32_SFLOAT, 4));
+  }
+
+  sh::FitGpuSettings settings{};
+  {
+    double lo[kMaxParams] = {}, hi[kMaxParams] = {};
+    ParameterBounds(plan.layout, lo, hi);
+    for (int j = 0; j < kMaxParams; ++j) {
+      settings.lower[j] = float(lo[j]);
+      settings.upper[j] = float(hi[j]);
+    }
+  }
+  settings.max_iterations = plan.settings.max_iterations;
+  settings.first_stage_iterations = plan.settings.first_stage_iterations;
+  settings.step_tolerance = float(plan.settings.step_tolerance);
+  settings.cost_tolerance = float(plan.settings.cost_tolerance);
+  settings.gradient_tolerance = float(plan.settings.gradient_tolerance);
+  REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, &settings, sizeof settings, buffers_.settings));
+  REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->desc.data(), desc_bytes, buffers_.desc));
+  REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->queue.data(), queue_bytes, buffers_.queue));
+  REFLCAP_RETURN_IF_ERROR(buffers_.records.Upload(*ctx_, cmd_, b->rgba.data(), slots * 16));
+  REFLCAP_RETURN_IF_ERROR(
+      buffers_.weights.Upload(*ctx_, cmd_, b->records.data() + 4 * slots, slots * 4));  // sqrt(w)
+
+  // Ticks per dispatch: the loop budget (T (R + 2) + 1 steps, see lm_fit.comp) and the submit
+  // work cap.
+  const uint64_t r = std::max<uint32_t>(1, b->max_residuals);
+  uint64_t ticks = std::max<uint64_t>(1, kMaxResidualEvaluationsPerSubmit / (uint64_t(lanes) * r));
+  const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(*ctx_);
+  if (budget != gpu::kNoLoopIterationLimit) {
+    ticks = std::min<uint64_t>(ticks, (budget - 1 - kLoopReserve) / (b->max_residuals + 2));
+  }
+  if (options_.max_ticks_per_dispatch > 0) {
+    ticks = std::min<uint64_t>(ticks, options_.max_ticks_per_dispatch);
+  }
+  REFLCAP_CHECK(ticks >= 1) << "problems above max_device_residuals reached the device";
+  // A bound no correct run reaches: every tick of a stage either evaluates (<= max_iterations +
+  // 1 per stage), rejects a step without evaluating (counted as an iteration), or fails a
+  // factorisation (< kLmMaxSolveFailures in a row between the others).
+  const uint64_t stage_ticks = (uint64_t(plan.settings.max_iterations) + 2) *
+                               (uint64_t(sh::kLmMaxSolveFailures) + 1);
+  const uint64_t problem_ticks = 2 * stage_ticks + 2;
+  const uint64_t max_dispatches = (b->queue.size() * problem_ticks) / (uint64_t(lanes) * ticks) +
+                                  problem_ticks / ticks + 3;
+
+  internal::LmBindings bindings;
+  bindings.settings = gpu::Bind(buffers_.settings, 0, sizeof(sh::FitGpuSettings));
+  bindings.desc = gpu::Bind(buffers_.desc, 0, desc_bytes);
+  bindings.queue = gpu::Bind(buffers_.queue, 0, queue_bytes);
+  bindings.lanes = gpu::Bind(buffers_.lanes, 0, lane_bytes);
+  bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
+  bindings.control = gpu::Bind(buffers_.control, 0, sizeof(sh::FitGpuControl));
+  bindings.records = buffers_.records.view();
+  bindings.weights = buffers_.weights.view();
+  kernels_->Write(bindings);
+
+  const sh::FitGpuPush push{uint32_t(b->queue.size()), lanes, uint32_t(ticks), 0};
+  const uint32_t groups = uint32_t(gpu::GroupCount(lanes, kLocalSize));
+  REFLCAP_RETURN_IF_ERROR(cmd_.Begin());
+  // Every lane starts idle (problem word = kFitNoProblem), the queue at its head.
+  REFLCAP_RETURN_IF_ERROR(cmd_.FillBuffer(buffers_.lanes, 0, lane_bytes, sh::kFitNoProblem));
+  REFLCAP_RETURN_IF_ERROR(cmd_.FillBuffer(buffers_.control, 0, sizeof(sh::FitGpuControl), 0));
+  for (uint64_t d = 0;; ++d) {
+    if (d > 0) REFLCAP_RETURN_IF_ERROR(cmd_.Begin());
+    REFLCAP_RETURN_IF_ERROR(  // busy and evaluations
+        cmd_.FillBuffer(buffers_.control, offsetof(sh::FitGpuControl, busy), 8, 0));
+    kernels_->RecordDispatch(cmd_, pipeline, push, groups);
+    REFLCAP_RETURN_IF_ERROR(cmd_.SubmitAndWait());
+    sh::FitGpuControl control{};
+    REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.control, 0, sizeof control, &control));
+    ++b->dispatches;
+    b->evaluations += control.evaluations;
+    if (control.busy == 0) break;
+    if (d + 1 >= max_dispatches) {
+      return InternalError("Vulkan fitter: ", control.busy, " lanes still busy after ",
+                           d + 1, " dispatches of ", ticks, " ticks (bound ", max_dispatches, ")");
+    }
+  }
+  b->results.resize(problems * REFLCAP_FIT_OUT_STRIDE(P));
+  REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.results, 0, result_bytes, b->results.data()));
+  b->ticks = uint32_t(ticks);
+  b->lanes = lanes;
+  b->device_seconds = Seconds(start);
+  return OkStatus();
+}
+
+void VulkanFitterImpl::Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results) {
+  const int per_texel = plan.per_texel;
+  const int P = plan.num_params;
+  const int stride = REFLCAP_FIT_OUT_STRIDE(P);
+  const int packed = PackedIndex(P, 0);
+  ParallelFor(
+      0, b.end - b.begin, kTexelsPerTask,
+      [&](int64_t t0, int64_t t1, int) {
+        for (int64_t t = t0; t < t1; ++t) {
+          TexelFit& fit = (*results)[b.begin + size_t(t)];
+          BeginTexel(plan.layout.lobes, &fit);
+          for (int p = 0; p < per_texel; ++p) {
+            const size_t i = size_t(t) * per_texel + p;
+            if (b.route[i] != kRouteDevice) {
+              FinishProblem(b.problems[i], b.solved[i], &fit);
+              continue;
+            }
+            const uint32_t* w = &b.results[i * stride];
+            SolvedProblem solved;
+            solved.status = FitStatus(int(w[sh::kFitOutStatus]));
+            solved.free_mask = w[sh::kFitOutFreeMask];
+            solved.iterations = int(w[sh::kFitOutIterations]);
+            solved.cost = BitsFloat(w[sh::kFitOutCost]);
+            for (int j = 0; j < P; ++j) solved.x[j] = BitsFloat(w[sh::kFitOutX + j]);
+            for (int k = 0; k < packed; ++k) solved.a[k] = BitsFloat(w[sh::kFitOutX + P + k]);
+            FinishProblem(b.problems[i], solved, &fit);
+          }
+        }
+      },
+      plan.workers);
+}
+
+Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
+                             std::vector<TexelFit>* results) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_RETURN_IF_ERROR(internal::ValidateChunk(chunk));
+  stats_ = VulkanFitStats{};
+  results->resize(chunk.texel_count);
+  if (chunk.texel_count == 0) return OkStatus();
+
+  Plan plan;
+  plan.layout = ProblemLayout{options.lobe_model, options.lobes};
+  plan.per_texel = ProblemsPerTexel(plan.layout.model);
+  plan.num_params = plan.layout.NumParams();
+  plan.settings = MakeLmSettings(options);
+  plan.workers = options.threads > 0 ? options.threads
+                 : options_.threads > 0 ? options_.threads
+                                        : HardwareThreads();
+  const gpu::DeviceInfo& info = ctx_->info();
+  const int P = plan.num_params;
+  const uint64_t range = info.max_storage_buffer_range;
+  const uint64_t widest = std::max<uint64_t>(REFLCAP_FIT_OUT_STRIDE(P), REFLCAP_FIT_DESC_STRIDE(P)) * 4;
+  plan.max_problems = std::min<uint64_t>(
+      options_.max_batch_problems > 0 ? options_.max_batch_problems : kDefaultBatchProblems,
+      range / widest);
+  plan.max_problems = std::max<uint32_t>(plan.max_problems, plan.per_texel);
+  plan.max_records = std::min<uint64_t>(
+      options_.max_batch_residuals > 0 ? options_.max_batch_residuals : kDefaultBatchResiduals,
+      internal::MaxTexelBufferElements(*ctx_));
+  const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(info);
+  plan.max_device_residuals = budget == gpu::kNoLoopIterationLimit
+                                  ? uint32_t(std::min<uint64_t>(plan.max_records, 0x7FFFFFFF))
+                                  : budget - 3 - kLoopReserve;  // one tick: R + 2 steps, + 1
+  if (options_.max_device_residuals > 0) {
+    plan.max_device_residuals = std::min(plan.max_device_residuals, options_.max_device_residuals);
+  }
+  plan.lane_cap = options_.lanes > 0 ? options_.lanes
+                  : info.IsSoftware() ? kSoftwareLanes
+                                      : kGpuLanes;
+  plan.lane_cap = std::min<uint64_t>(plan.lane_cap, range / (REFLCAP_FIT_LANE_STRIDE(P) * 4));
+  stats_.loop_budget = budget;
+  stats_.max_device_residuals = plan.max_device_residuals;
+  stats_.min_ticks_per_dispatch = 0;
+
+  REFLCAP_ASSIGN_OR_RETURN(VkPipeline pipeline, kernels_->Pipeline(LmShader(plan.layout), int(options.loss)));
+
+  // Per-worker arenas for one texel of the chunk's largest sample count.
+  uint64_t max_samples = 1;
+  for (uint32_t t = 0; t < chunk.texel_count; ++t) {
+    max_samples = std::max<uint64_t>(max_samples, chunk.SampleCount(t));
+  }
+  if (arenas_.size() < size_t(plan.workers)) arenas_.resize(plan.workers);
+  for (ProblemArena& a : arenas_) a.Reserve(3 * max_samples, max_samples);
+
+  const std::vector<std::pair<uint32_t, uint32_t>> cuts = CutBatches(chunk, plan);
+  // Batch k runs on the device while batch k - 1 is finished and batch k + 1 prepared on the CPU
+  // (two host batches: k + 1 reuses k - 1's once it is finished).
+  Prepare(chunk, options, plan, cuts[0].first, cuts[0].second, &batches_[0]);
+  for (size_t k = 0; k < cuts.size(); ++k) {
+    Batch& current = batches_[k % 2];
+    Batch& other = batches_[(k + 1) % 2];
+    std::future<Status> device = std::async(std::launch::async, [&] {
+      return RunOnDevice(plan, pipeline, &current);
+    });
+    if (k > 0) Finish(plan, other, results);
+    if (k + 1 < cuts.size()) Prepare(chunk, options, plan, cuts[k + 1].first, cuts[k + 1].second, &other);
+    REFLCAP_RETURN_IF_ERROR(device.get());
+    ++stats_.batches;
+    stats_.dispatches += current.dispatches;
+    stats_.max_dispatches_per_batch = std::max(stats_.max_dispatches_per_batch, current.dispatches);
+    if (current.ticks > 0) {
+      stats_.min_ticks_per_dispatch = stats_.min_ticks_per_dispatch == 0
+                                          ? current.ticks
+                                          : std::min(stats_.min_ticks_per_dispatch, current.ticks);
+    }
+    stats_.max_residuals = std::max(stats_.max_residuals, current.max_residuals);
+    stats_.lanes = std::max(stats_.lanes, current.lanes);
+    stats_.device_seconds += current.device_seconds;
+    stats_.residual_evaluations += current.evaluations;
+    for (uint8_t route : current.route) {
+      stats_.gpu_problems += route == kRouteDevice;
+      stats_.cpu_problems += route == kRouteCpu;
+      stats_.trivial_problems += route == kRouteTrivial;
+    }
+  }
+  Finish(plan, batches_[(cuts.size() - 1) % 2], results);
+  return OkStatus();
+}
+
+}  // namespace
+
+Status VulkanFitterOptions::Validate() const {
+  if (threads < 0) return InvalidArgumentError("Vulkan fitter: threads must be >= 0, got ", threads);
+  return OkStatus();
+}
+
+StatusOr<std::unique_ptr<VulkanFitter>> CreateVulkanFitter(const VulkanFitterOptions& options) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  gpu::ContextOptions context_options;
+  context_options.device = options.device;
+  StatusOr<std::unique_ptr<gpu::VkContext>> ctx = gpu::VkContext::Create(context_options);
+  if (!ctx.ok()) {
+    return Status(ctx.status().code(),
+                  StrCat("--backend vulkan: ", ctx.status().message()));
+  }
+  REFLCAP_ASSIGN_OR_RETURN(gpu::CommandBuffer cmd, gpu::CommandBuffer::Create(**ctx));
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<internal::LmKernels> kernels,
+                           internal::LmKernels::Create(**ctx, kLocalSize));
+  return std::unique_ptr<VulkanFitter>(new VulkanFitterImpl(std::move(ctx).value(), std::move(cmd),
+                                                            std::move(kernels), options));
+}
+
+StatusOr<AutoBackendChoice> ChooseAutoBackend(const std::string& device) {
+  AutoBackendChoice choice;
+  StatusOr<std::vector<gpu::DeviceInfo>> devices = gpu::ListDevices();
+  if (!devices.ok()) {
+    if (!device.empty()) {
+      return Status(devices.status().code(), StrCat("--device ", device, ": ", devices.status().message()));
+    }
+    choice.backend = Backend::kCpu;
+    choice.fell_back = true;
+    choice.reason = StrCat("no Vulkan device (", devices.status().message(),
+                           "): fitting on the CPU");
+    return choice;
+  }
+  StatusOr<size_t> selected = gpu::SelectDevice(*devices, device);
+  if (!selected.ok()) {
+    if (!device.empty()) return selected.status();
+    choice.backend = Backend::kCpu;
+    choice.fell_back = true;
+    choice.reason = StrCat("no usable Vulkan device (", selected.status().message(),
+                           "): fitting on the CPU");
+    return choice;
+  }
+  const gpu::DeviceInfo& d = (*devices)[*selected];
+  choice.device = d.name;
+  if (!d.IsSoftware()) {
+    choice.backend = Backend::kVulkan;
+    choice.reason = StrCat("Vulkan ", gpu::DeviceTypeName(d.type), " ", d.name);
+  } else if (!device.empty()) {
+    choice.backend = Backend::kVulkan;
+    choice.reason = StrCat("Vulkan CPU device ", d.name, " (chosen by --device)");
+  } else {
+    choice.backend = Backend::kCpu;
+    choice.reason = StrCat("the only Vulkan device is the CPU device ", d.name,
+                           ": the batched CPU path is faster on the same cores");
+  }
+  return choice;
+}
+
+}  // namespace reflcap::fit
