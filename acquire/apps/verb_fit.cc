@@ -40,6 +40,9 @@ int RunFit(int argc, char** argv) {
   args.AddString("init", &init, "NAME",
                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  args.AddDouble("highlight-cone", &options.highlight_cone_deg,
+                 "a lobe is fitted only where some sample lies within DEG of the mirror "
+                 "direction (default 10)");
   args.AddDouble("loss-scale", &options.loss_scale,
                  "robust loss scale in noise standard deviations (default 3)");
   args.AddInt("max-iterations", &options.max_iterations, "LM steps per stage, 1..10000 (default 100)");

@@ -146,6 +146,9 @@ int RunRun(int argc, char** argv) {
   args.AddString("lobe-model", &lobe_model, "MODEL", "aniso (default), iso or shared");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  args.AddDouble("highlight-cone", &options.fit.highlight_cone_deg,
+                 "a lobe is fitted only where some sample lies within DEG of the mirror "
+                 "direction (default 10)");
   args.AddInt("max-iterations", &options.fit.max_iterations, "LM steps per stage (default 100)");
   args.AddFlag("overwrite", &options.overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;

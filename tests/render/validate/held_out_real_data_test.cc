@@ -1,0 +1,93 @@
+// Held-out accuracy on data this project did not make, through the reflcap executable: the
+// Lafortune fit must beat the Lambert-only fit (`--lobes 0`) on the holdout split — on the
+// Blender-rendered suzanne turntable capture (holdout PSNR) and on every DiLiGenT object (holdout
+// relative RMSE). Both need ../shared/data and skip with a message without it (a user's checkout,
+// CI); README.md's "Held-out accuracy on independent data" has the full-resolution numbers.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/core/check.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap {
+namespace {
+namespace fs = std::filesystem;
+
+// Suzanne at a 128² atlas (the test's size; README's numbers are at 512²) gains 2.1 dB from the
+// lobe (512²: 2.6 dB). 1 dB is half of that: a fit that loses the lobe's benefit on the glossy
+// patches (a broken start, stage or fallback) falls well below it; noise between runs is < 0.05 dB.
+constexpr double kMinSuzanneLobeGainDb = 1.0;
+
+nlohmann::json Overall(const fs::path& run) {
+  std::ifstream in(run / "report" / "metrics.json");
+  REFLCAP_CHECK(in.good()) << run;
+  return nlohmann::json::parse(in)["overall"];
+}
+
+testing::CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
+  return testing::RunCommand(REFLCAP_BINARY, args, dir);
+}
+
+TEST(HeldOutRealData, SuzanneLafortuneBeatsLambertOnHoldoutPsnr) {
+  const auto shared = testing::SharedDataDir();
+  if (!shared || !fs::is_directory(*shared / "turntable" / "suzanne")) {
+    GTEST_SKIP() << "../shared/data/turntable/suzanne is absent: skipping the suzanne holdout test";
+  }
+  testing::ScratchDir dir;
+  const std::string capture = (*shared / "turntable" / "suzanne").string();
+  double psnr[2] = {0, 0};
+  for (int lobes : {0, 1}) {
+    const fs::path out = dir / ("lobes" + std::to_string(lobes));
+    auto r = RunCli("run --quiet " + capture + " --out " + out.string() + " --atlas-res 128 --lobes " +
+                     std::to_string(lobes),
+                 dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    psnr[lobes] = Overall(out)["psnr_db"].get<double>();
+    // The report says where the error is: every region is present with its share.
+    const auto regions = Overall(out)["regions"];
+    for (const char* region : {"shadow_edge", "high_curvature", "grazing", "elsewhere"}) {
+      EXPECT_TRUE(regions.contains(region)) << region;
+    }
+    EXPECT_TRUE(fs::is_regular_file(out / "report" / "report.html"));
+  }
+  std::printf("suzanne (128^2 atlas) holdout PSNR: Lafortune %.2f dB, Lambert only %.2f dB\n",
+              psnr[1], psnr[0]);
+  EXPECT_GT(psnr[1], psnr[0] + kMinSuzanneLobeGainDb);
+}
+
+TEST(HeldOutRealData, DiligentLafortuneBeatsLambertOnHoldoutRelativeRmse) {
+  const auto shared = testing::SharedDataDir();
+  if (!shared || !fs::is_directory(*shared / "diligent")) {
+    GTEST_SKIP() << "../shared/data/diligent is absent: skipping the DiLiGenT holdout test";
+  }
+  testing::ScratchDir dir;
+  // The margin is small on cat and pot1 (6e-5 and 1e-5 relative RMSE: few of their texels see a
+  // highlight, README.md says why), so the test asserts the ordering, not a margin.
+  for (const char* object : {"ball16", "bear", "buddha", "cat", "goblet", "pot1"}) {
+    const fs::path capture = dir / object;
+    auto r = RunCli(std::string("import-diligent --quiet ") + (*shared / "diligent" / object).string() +
+                     " --out " + capture.string(),
+                 dir);
+    ASSERT_EQ(r.exit_code, 0) << object << ": " << r.err;
+    double rel_rmse[2] = {0, 0};
+    for (int lobes : {0, 1}) {
+      const fs::path out = dir / (std::string(object) + "_lobes" + std::to_string(lobes));
+      r = RunCli("run --quiet " + capture.string() + " --out " + out.string() + " --lobes " +
+                  std::to_string(lobes),
+              dir);
+      ASSERT_EQ(r.exit_code, 0) << object << ": " << r.err;
+      rel_rmse[lobes] = Overall(out)["rel_rmse"].get<double>();
+    }
+    std::printf("DiLiGenT %-7s holdout rel. RMSE: Lafortune %.5f, Lambert only %.5f\n", object,
+                rel_rmse[1], rel_rmse[0]);
+    EXPECT_LT(rel_rmse[1], rel_rmse[0]) << object;
+    fs::remove_all(capture);  // keep the scratch folder small
+  }
+}
+
+}  // namespace
+}  // namespace reflcap
