@@ -15,7 +15,7 @@ int RunFit(int argc, char** argv) {
   std::string samples, out, backend_name = "auto", device, lobe_model = "aniso", init = "seed",
               loss = "none";
   fit::FitOptions options;
-  bool overwrite = false;
+  bool overwrite = false, no_lobe_transfer = false;
   ArgParser args("fit", "SAMPLES --out FIT [options]",
                  "Fit every texel's BRDF (Lambert + K Lafortune lobes per RGB channel) to the\n"
                  "samples of a store written by `reflcap resample`: the seed paper's data-driven\n"
@@ -40,6 +40,15 @@ int RunFit(int argc, char** argv) {
   args.AddString("init", &init, "NAME",
                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
+               "keep Lambert-only the texels that never saw their mirror configuration, instead "
+               "of lending them a similar neighbour's lobe");
+  args.AddInt("lobe-transfer-radius", &options.lobe_transfer.radius,
+              "lobe transfer: donors within N atlas texels (default 6)");
+  args.AddDouble("lobe-transfer-albedo", &options.lobe_transfer.albedo_tolerance,
+                 "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
+  args.AddInt("lobe-transfer-rounds", &options.lobe_transfer.rounds,
+              "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
   args.AddDouble("highlight-cone", &options.highlight_cone_deg,
                  "a lobe is fitted only where some sample lies within DEG of the mirror "
                  "direction (default 10)");
@@ -79,6 +88,7 @@ int RunFit(int argc, char** argv) {
     }
   }
   options.lobe_model = *model;
+  options.lobe_transfer.enabled = !no_lobe_transfer;
   options.init = *init_scheme;
   options.loss = *loss_kind;
   if (Status s = options.Validate(); !s.ok()) {

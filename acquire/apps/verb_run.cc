@@ -130,6 +130,7 @@ std::string PipelineSummaryLine(const PipelineSummary& s) {
 int RunRun(int argc, char** argv) {
   std::string capture, out, backend = "auto", device, lobe_model = "aniso", init = "seed", loss = "none";
   PipelineOptions options;
+  bool no_lobe_transfer = false;
   ArgParser args("run", "CAPTURE --out DIR [options]",
                  "The whole pipeline: resample the train split -> fit -> re-render the holdout\n"
                  "split -> validate. DIR gets samples/, fit/, renders/ and report/ (the outputs of\n"
@@ -146,6 +147,15 @@ int RunRun(int argc, char** argv) {
   args.AddString("lobe-model", &lobe_model, "MODEL", "aniso (default), iso or shared");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
+               "keep Lambert-only the texels that never saw their mirror configuration, instead "
+               "of lending them a similar neighbour's lobe");
+  args.AddInt("lobe-transfer-radius", &options.fit.lobe_transfer.radius,
+              "lobe transfer: donors within N atlas texels (default 6)");
+  args.AddDouble("lobe-transfer-albedo", &options.fit.lobe_transfer.albedo_tolerance,
+                 "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
+  args.AddInt("lobe-transfer-rounds", &options.fit.lobe_transfer.rounds,
+              "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
   args.AddDouble("highlight-cone", &options.fit.highlight_cone_deg,
                  "a lobe is fitted only where some sample lies within DEG of the mirror "
                  "direction (default 10)");
@@ -174,6 +184,7 @@ int RunRun(int argc, char** argv) {
     }
   }
   options.fit.lobe_model = *model;
+  options.fit.lobe_transfer.enabled = !no_lobe_transfer;
   options.fit.init = *init_scheme;
   options.fit.loss = *loss_kind;
   for (const Status& s : {options.resample.Validate(), options.fit.Validate()}) {

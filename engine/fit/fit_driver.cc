@@ -9,6 +9,7 @@
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
+#include "engine/fit/lobe_transfer.h"
 #include "engine/fit/problem.h"
 #include "engine/image/exr_io.h"
 #include "engine/texel/brdf_maps.h"
@@ -34,25 +35,31 @@ Json Percentiles(std::vector<double> v) {
 }  // namespace
 
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, int lobes,
-                    const std::vector<TexelFit>& fits) {
+                    const std::vector<TexelFit>& fits, const std::vector<int64_t>& lobe_donor) {
   REFLCAP_CHECK(fits.size() == atlas.TexelCount());
+  REFLCAP_CHECK(lobe_donor.empty() || lobe_donor.size() == fits.size());
   BrdfMaps params, sigma;
   params.num_lobes = sigma.num_lobes = lobes;
   params.texels.reserve(fits.size());
   sigma.texels.reserve(fits.size());
-  Image status(atlas.width, atlas.height, 3, 0.0f);
-  for (size_t p = 0; p < status.PixelCount(); ++p) status.data[3 * p] = float(gpu::shared::kFitStatusNoTexel);
+  Image status(atlas.width, atlas.height, 4, 0.0f);
+  for (size_t p = 0; p < status.PixelCount(); ++p) {
+    status.data[4 * p] = float(gpu::shared::kFitStatusNoTexel);
+    status.data[4 * p + 3] = -1;
+  }
   for (size_t t = 0; t < fits.size(); ++t) {
     params.texels.push_back(fits[t].params);
     sigma.texels.push_back(fits[t].sigma);
-    float* px = &status.data[3 * size_t(atlas.pixel_of_texel[t])];
+    float* px = &status.data[4 * size_t(atlas.pixel_of_texel[t])];
     px[0] = float(int(fits[t].status));
     px[1] = float(fits[t].iterations);
     px[2] = fits[t].cost;
+    // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
+    px[3] = lobe_donor.empty() ? -1.0f : float(lobe_donor[t]);
   }
   REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "params.exr", params, atlas));
   REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "sigma.exr", sigma, atlas));
-  return WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost"});
+  return WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor"});
 }
 
 StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
@@ -114,8 +121,42 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   }
   progress.Finish();
 
+  // Lobe transfer (lobe_transfer.h): candidates from the maps, then a second pass over the
+  // chunks that hold recipients to test them on their own samples.
+  const auto transfer_start = std::chrono::steady_clock::now();
+  LobeTransferStats transfer;
+  std::vector<int64_t> lobe_donor(info.texels, -1);
+  if (options.lobe_transfer.enabled && options.lobes > 0) {
+    for (int round = 0; round < options.lobe_transfer.rounds; ++round) {
+      LobeTransferStats round_stats;
+      const auto candidates =
+          FindLobeDonors(atlas, fits, lobe_donor, options.lobe_transfer, &round_stats);
+      if (round == 0) {
+        transfer.recipients = round_stats.recipients;
+        transfer.no_donor = round_stats.no_donor;
+      }
+      if (round_stats.no_donor == round_stats.recipients) break;  // no candidate anywhere
+      for (uint32_t c = 0; c < info.chunks; ++c) {
+        // Chunks hold consecutive texels: skip those without a recipient that has candidates.
+        const uint64_t first = uint64_t(c) * info.chunk_texels;
+        const uint64_t end = std::min<uint64_t>(first + info.chunk_texels, info.texels);
+        bool any = false;
+        for (uint64_t t = first; t < end && !any; ++t) any = !candidates[t].empty();
+        if (!any) continue;
+        REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk chunk, store->ReadChunk(c));
+        ApplyLobeTransfer(chunk, candidates, options.lobe_transfer, options.min_cos_theta,
+                          options.threads, &fits, &lobe_donor, &round_stats);
+      }
+      transfer.rejected = round_stats.rejected;  // the last round's: still refused at the end
+      transfer.transferred += round_stats.transferred;
+      ++transfer.rounds;
+      if (round_stats.transferred == 0) break;
+    }
+  }
+  const double transfer_seconds = Seconds(transfer_start);
+
   const auto write_start = std::chrono::steady_clock::now();
-  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, options.lobes, fits));
+  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, options.lobes, fits, lobe_donor));
 
   std::vector<double> costs, chi2;
   double iterations = 0;
@@ -158,6 +199,12 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"min_cos_theta", options.min_cos_theta},
         {"highlight_cone_deg", options.highlight_cone_deg},
         {"evidence_sigmas", options.evidence_sigmas},
+        {"lobe_transfer",
+         {{"enabled", options.lobe_transfer.enabled},
+          {"radius", options.lobe_transfer.radius},
+          {"albedo_tolerance", options.lobe_transfer.albedo_tolerance},
+          {"max_cost_increase", options.lobe_transfer.max_cost_increase},
+          {"rounds", options.lobe_transfer.rounds}}},
         {"step_tolerance", options.step_tolerance},
         {"cost_tolerance", options.cost_tolerance},
         {"gradient_tolerance", options.gradient_tolerance}}},
@@ -166,6 +213,12 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"fits", size_t(fits_count)},
       {"status_counts", counts},
       {"lambert_only", lambert_only},
+      {"lobe_transfer",
+       {{"recipients", transfer.recipients},
+        {"no_donor", transfer.no_donor},
+        {"rejected", transfer.rejected},
+        {"transferred", transfer.transferred},
+        {"rounds", transfer.rounds}}},
       {"cost_percentiles", Percentiles(costs)},
       {"reduced_chi2_percentiles", Percentiles(chi2)},
       {"iterations", {{"mean", summary.texels_with_samples ? iterations / summary.texels_with_samples : 0.0},
@@ -178,6 +231,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   summary.total_seconds = Seconds(start);
   report["timings_s"] = {{"read_wait", read_seconds},
                          {"fit", fit_seconds},
+                         {"lobe_transfer", transfer_seconds},
                          {"write_maps", write_seconds_so_far},
                          {"total", summary.total_seconds}};
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / "fit_report.json", report.dump(2) + "\n"));

@@ -5,7 +5,8 @@
 //   FIT/params.exr       BrdfMaps (engine/texel/brdf_maps.h channel names), atlas layout
 //   FIT/sigma.exr        the same channels, each parameter's standard deviation (-1 = unknown)
 //   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
-//                        `iterations` and `cost` (final 1/2 sum rho(r^2))
+//                        `iterations`, `cost` (final 1/2 sum rho(r^2)) and `lobe_donor` (the
+//                        texel whose lobes it borrowed by lobe transfer, -1 for none)
 //   FIT/fit_report.json  backend, device, options, texels, counts per status, cost and reduced
 //                        chi^2 percentiles, iterations, fits_per_second, timings
 // The folder is staged and moved into place only when complete (StagingDir).
@@ -43,7 +44,10 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
                                const std::string& backend_choice = "");
 
 // Writes params.exr, sigma.exr and status.exr for per-texel fits in `atlas` layout into `dir`.
+// lobe_donor[t]: the texel whose lobes texel t borrowed (lobe_transfer.h), -1 for none; empty =
+// none anywhere.
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, int lobes,
-                    const std::vector<TexelFit>& fits);
+                    const std::vector<TexelFit>& fits,
+                    const std::vector<int64_t>& lobe_donor = {});
 
 }  // namespace reflcap::fit

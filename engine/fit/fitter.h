@@ -70,6 +70,30 @@ enum class LossKind { kNone = 0, kHuber = 1, kCauchy = 2 };
 const char* LossKindName(LossKind loss);
 StatusOr<LossKind> ParseLossKind(const std::string& name);
 
+// Lobe transfer (engine/fit/lobe_transfer.h): after the fit, a texel that never saw its mirror
+// configuration (kUnidentifiableLobe) borrows the lobes of a nearby texel of similar albedo when
+// its own samples do not contradict them. Applied by RunFit (the FIT driver), not by Fitter::Fit.
+struct LobeTransferOptions {
+  bool enabled = true;
+  // Window half-size in atlas texels. 6: a 13 x 13 window, a few millimetres on a 512^2 atlas of
+  // a 20 cm object; small enough to stay inside one material region, large enough to reach past
+  // a band of unidentifiable texels (the rig's gaps in half-vector elevation are a few degrees
+  // of normal, i.e. a few texels on a curved surface).
+  int radius = 6;
+  // Relative RGB albedo distance a donor may have. 0.15: texture variation within one material
+  // (the synth's +-10 % modulation, Suzanne's patches) passes; distinct materials rarely do.
+  double albedo_tolerance = 0.15;
+  // Cost increase (1/2 sum w r^2 in noise units) the recipient's samples may show with the
+  // borrowed lobe over its Lambert-only fit. 2 = a chi-square increase of 4 summed over the
+  // texel's residuals: a 2-sigma change for the one effective parameter the lobe adds; a lobe
+  // that contradicts the samples costs far more.
+  double max_cost_increase = 2.0;
+  // Rounds of transfer (lobe_transfer.h): round r lends the lobes borrowed in round r - 1 on.
+  int rounds = 4;
+
+  Status Validate() const;
+};
+
 struct FitOptions {
   // Lafortune lobes per texel, 0..3 (0 = Lambert only; at most 2 for the shared lobe model).
   int lobes = 1;
@@ -113,6 +137,7 @@ struct FitOptions {
   double gradient_tolerance = 1e-10;
   // Worker threads (0 = all hardware threads).
   int threads = 0;
+  LobeTransferOptions lobe_transfer;
 
   Status Validate() const;
   std::string ToString() const;

@@ -100,8 +100,8 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   std::vector<std::string> names;
   auto status = ReadExrChannels(out / "status.exr", &names);
   ASSERT_TRUE(status.ok()) << status.status().ToString();
-  EXPECT_EQ(names, (std::vector<std::string>{"cost", "iterations", "status"}));
-  const int status_channel = 2;
+  EXPECT_EQ(names, (std::vector<std::string>{"cost", "iterations", "lobe_donor", "status"}));
+  const int status_channel = 3;
   EXPECT_EQ(status->at(0, 0, status_channel), -1.0f);  // pixel 0 holds no texel
   EXPECT_EQ(status->at(1, 0, status_channel), float(int(FitStatus::kConverged)));
 

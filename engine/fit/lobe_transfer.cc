@@ -1,0 +1,213 @@
+#include "engine/fit/lobe_transfer.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <utility>
+
+#include "engine/brdf/lafortune.h"
+#include "engine/core/check.h"
+#include "engine/core/parallel.h"
+
+namespace reflcap::fit {
+
+Status LobeTransferOptions::Validate() const {
+  if (radius < 1 || radius > 64) {
+    return InvalidArgumentError("lobe transfer radius ", radius, " outside [1, 64] texels");
+  }
+  if (!(albedo_tolerance > 0 && albedo_tolerance <= 1)) {
+    return InvalidArgumentError("lobe transfer albedo tolerance ", albedo_tolerance,
+                                " outside (0, 1]");
+  }
+  if (rounds < 1 || rounds > 64) {
+    return InvalidArgumentError("lobe transfer rounds ", rounds, " outside [1, 64]");
+  }
+  if (!(max_cost_increase >= 0 && std::isfinite(max_cost_increase))) {
+    return InvalidArgumentError("lobe transfer cost increase ", max_cost_increase,
+                                " must be finite and >= 0");
+  }
+  return OkStatus();
+}
+
+namespace {
+
+// Below this norm an albedo is black: the relative distance of two near-black albedos measures
+// noise, so the denominator never falls under it (1e-3 = 0.1 % reflectance).
+constexpr double kBlackAlbedo = 1e-3;
+
+double AlbedoDistance(const brdf::BrdfParams& a, const brdf::BrdfParams& b) {
+  double diff = 0, na = 0, nb = 0;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    diff += (double(a.rho_d[c]) - b.rho_d[c]) * (double(a.rho_d[c]) - b.rho_d[c]);
+    na += double(a.rho_d[c]) * a.rho_d[c];
+    nb += double(b.rho_d[c]) * b.rho_d[c];
+  }
+  return std::sqrt(diff) / std::max({std::sqrt(na), std::sqrt(nb), kBlackAlbedo});
+}
+
+// A texel that fitted its own lobe, or borrowed one in an earlier round.
+bool IsDonor(const TexelFit& f, int64_t borrowed_from) {
+  return !f.lambert_only && f.params.num_lobes > 0 &&
+         (f.status == FitStatus::kConverged || borrowed_from >= 0);
+}
+
+bool IsRecipient(const TexelFit& f, int64_t borrowed_from) {
+  return f.status == FitStatus::kUnidentifiableLobe && f.samples >= kMinTransferSamples &&
+         f.params.num_lobes > 0 && f.lambert_only && borrowed_from < 0;
+}
+
+// One sample of a recipient, as the fit used it: unit directions, both above min_cos.
+struct UsableSample {
+  float wi[3], wo[3];
+  bool usable = false;
+};
+
+UsableSample Prepare(const BrdfSample& s, double min_cos_theta) {
+  UsableSample u;
+  double ni = 0, no = 0;
+  for (int j = 0; j < 3; ++j) {
+    if (!std::isfinite(s.wi[j]) || !std::isfinite(s.wo[j])) return u;
+    ni += double(s.wi[j]) * s.wi[j];
+    no += double(s.wo[j]) * s.wo[j];
+  }
+  // As problem.h's kMinDirectionNorm: shorter is a zeroed record, longer is re-normalised.
+  if (ni < 0.25 || no < 0.25) return u;
+  ni = std::sqrt(ni);
+  no = std::sqrt(no);
+  for (int j = 0; j < 3; ++j) {
+    u.wi[j] = float(s.wi[j] / ni);
+    u.wo[j] = float(s.wo[j] / no);
+  }
+  u.usable = u.wi[2] >= min_cos_theta && u.wo[2] >= min_cos_theta;
+  return u;
+}
+
+// Per channel: the albedo re-fit with `lobes` fixed (none when `params` is null) and its cost.
+double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
+                       const brdf::BrdfParams* params, std::array<float, brdf::kChannels>* rho) {
+  double cost = 0;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    std::array<float, brdf::kMaxParamsPerChannel> channel{};
+    if (params) channel = params->Channel(c);
+    channel[0] = 0;  // the lobe part only
+    const int lobes = params ? params->num_lobes : 0;
+    double sw = 0, swr = 0;
+    for (size_t i = 0; i < count; ++i) {
+      const float w = samples[i].weight[c], y = samples[i].value[c];
+      if (!usable[i].usable || !(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
+      const double lobe = brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes);
+      sw += w;
+      swr += w * (y - lobe);
+    }
+    // No usable residual in this channel: albedo 0, no cost.
+    const double diffuse = sw > 0 ? std::max(0.0, swr / sw) : 0.0;
+    (*rho)[c] = float(diffuse * kPi);
+    for (size_t i = 0; i < count; ++i) {
+      const float w = samples[i].weight[c], y = samples[i].value[c];
+      if (!usable[i].usable || !(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
+      const double lobe = brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes);
+      const double r = diffuse + lobe - y;
+      cost += 0.5 * w * r * r;
+    }
+  }
+  return cost;
+}
+
+}  // namespace
+
+std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
+                                                  const std::vector<TexelFit>& fits,
+                                                  const std::vector<int64_t>& donor_of,
+                                                  const LobeTransferOptions& options,
+                                                  LobeTransferStats* stats) {
+  REFLCAP_CHECK(fits.size() == atlas.TexelCount());
+  REFLCAP_CHECK(donor_of.size() == fits.size());
+  std::vector<std::vector<uint32_t>> candidates(fits.size());
+  if (!options.enabled) return candidates;
+  std::vector<int64_t> texel_at(size_t(atlas.width) * atlas.height, -1);
+  for (size_t t = 0; t < fits.size(); ++t) texel_at[atlas.pixel_of_texel[t]] = int64_t(t);
+  std::atomic<size_t> recipients{0}, no_donor{0};
+  ParallelFor(0, int64_t(fits.size()), 4096, [&](int64_t begin, int64_t end, int) {
+    std::vector<std::pair<double, uint32_t>> found;
+    for (int64_t t = begin; t < end; ++t) {
+      if (!IsRecipient(fits[t], donor_of[t])) continue;
+      ++recipients;
+      const int x0 = int(atlas.pixel_of_texel[t] % uint32_t(atlas.width));
+      const int y0 = int(atlas.pixel_of_texel[t] / uint32_t(atlas.width));
+      found.clear();
+      for (int y = std::max(0, y0 - options.radius);
+           y <= std::min(atlas.height - 1, y0 + options.radius); ++y) {
+        for (int x = std::max(0, x0 - options.radius);
+             x <= std::min(atlas.width - 1, x0 + options.radius); ++x) {
+          const int64_t d = texel_at[size_t(y) * atlas.width + x];
+          if (d < 0 || !IsDonor(fits[d], donor_of[d]) ||
+              fits[d].params.num_lobes != fits[t].params.num_lobes) {
+            continue;
+          }
+          const double distance = AlbedoDistance(fits[t].params, fits[d].params);
+          if (distance <= options.albedo_tolerance) found.emplace_back(distance, uint32_t(d));
+        }
+      }
+      if (found.empty()) {
+        ++no_donor;
+        continue;
+      }
+      const size_t keep = std::min(found.size(), size_t(kMaxTransferCandidates));
+      std::partial_sort(found.begin(), found.begin() + keep, found.end());
+      for (size_t i = 0; i < keep; ++i) candidates[t].push_back(found[i].second);
+    }
+  });
+  stats->recipients += recipients;
+  stats->no_donor += no_donor;
+  return candidates;
+}
+
+void ApplyLobeTransfer(const TexelSampleChunk& chunk,
+                       const std::vector<std::vector<uint32_t>>& candidates,
+                       const LobeTransferOptions& options, double min_cos_theta, int threads,
+                       std::vector<TexelFit>* fits, std::vector<int64_t>* donor_of,
+                       LobeTransferStats* stats) {
+  if (!options.enabled) return;
+  std::atomic<size_t> rejected{0}, transferred{0};
+  ParallelFor(0, int64_t(chunk.texel_count), 256, [&](int64_t begin, int64_t end, int) {
+    std::vector<UsableSample> usable;
+    for (int64_t i = begin; i < end; ++i) {
+      const size_t t = size_t(chunk.first_texel) + size_t(i);
+      if (candidates[t].empty()) continue;
+      const size_t count = chunk.SampleCount(uint32_t(i));
+      const BrdfSample* samples = chunk.SamplesOf(uint32_t(i));
+      usable.resize(count);
+      for (size_t k = 0; k < count; ++k) usable[k] = Prepare(samples[k], min_cos_theta);
+      std::array<float, brdf::kChannels> rho{};
+      const double lambert_cost = RefitAlbedoCost(samples, count, usable.data(), nullptr, &rho);
+      double best_cost = lambert_cost + options.max_cost_increase;
+      int64_t best = -1;
+      std::array<float, brdf::kChannels> best_rho{};
+      for (uint32_t donor : candidates[t]) {
+        const double cost =
+            RefitAlbedoCost(samples, count, usable.data(), &(*fits)[donor].params, &rho);
+        if (std::isfinite(cost) && cost <= best_cost) {
+          best_cost = cost;
+          best = donor;
+          best_rho = rho;
+        }
+      }
+      if (best < 0) {
+        ++rejected;
+        continue;
+      }
+      TexelFit& f = (*fits)[t];
+      f.params.lobes = (*fits)[size_t(best)].params.lobes;
+      f.params.rho_d = best_rho;
+      f.cost = float(best_cost);
+      f.lambert_only = false;
+      for (int c = 0; c < brdf::kChannels; ++c) f.sigma.rho_d[c] = -1;  // re-fitted, not measured
+      (*donor_of)[t] = best;
+      ++transferred;
+    }
+  }, threads);
+  stats->rejected += rejected;
+  stats->transferred += transferred;
+}
+
+}  // namespace reflcap::fit

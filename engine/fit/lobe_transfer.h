@@ -1,0 +1,75 @@
+#pragma once
+// Lobe transfer: a texel whose samples never came near its mirror configuration
+// (kUnidentifiableLobe) is fitted Lambert-only, so a held-out view that shows its highlight shows
+// none in the re-render. Surfaces are made of materials that span many texels; the neighbours
+// of such a texel often did see their highlight. So, after every texel is fitted:
+//
+//   1. Candidates (atlas space). For each recipient — a texel with status kUnidentifiableLobe and
+//      at least kMinTransferSamples valid samples — the donors are the texels within `radius`
+//      atlas texels (a square window) that fitted a lobe of their own (status kConverged, not
+//      Lambert-only) and whose diffuse albedo is within `albedo_tolerance` of the recipient's
+//      (|rho_a - rho_b| / max(|rho_a|, |rho_b|), RGB Euclidean). Up to kMaxTransferCandidates,
+//      closest albedo first.
+//   2. Test (the recipient's own samples, a second pass over the store). For each candidate the
+//      recipient keeps the donor's lobes and re-fits its albedo by weighted least squares with
+//      them fixed (rho_c = pi sum w (y - lobe) / sum w, clamped at 0). The candidate is accepted
+//      when this cost exceeds the recipient's Lambert-only cost by at most `max_cost_increase`
+//      (1/2 sum w r^2, noise units): the samples do not contradict the lobe. Among accepted
+//      candidates the lowest cost wins.
+//
+// Rounds: a texel that borrowed a lobe lends it on in the next round, so a lobe spreads through
+// a region of one material as far as the albedo and sample tests let it (region growing), up to
+// `rounds` rounds, each a pass over the chunks that hold recipients with candidates. A round's
+// counts add to the stats; `recipients` and `no_donor` are those of the first round.
+//
+// A matte texel next to a glossy one is protected twice: the albedo test (different materials
+// differ in albedo more often than not), and kUnidentifiableLobe itself — a texel that had a
+// sample near its mirror direction and showed no lobe there is "lobe absent" (kConverged,
+// Lambert-only), never a recipient. The transferred texel keeps its status (the lobe is
+// borrowed, not measured), its lobe sigmas stay -1 (unknown), and the FIT maps record the donor.
+#include <cstdint>
+#include <vector>
+
+#include "engine/core/status.h"
+#include "engine/fit/fitter.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/samples.h"
+
+namespace reflcap::fit {
+
+// LobeTransferOptions (the settings) live in fitter.h, as FitOptions::lobe_transfer.
+
+// A recipient needs this many valid samples for its albedo re-fit and the cost test to mean
+// anything (3: one per channel would fit rho exactly and every lobe would pass).
+constexpr int kMinTransferSamples = 3;
+// Candidates tested per recipient: the few closest in albedo; more only costs time (a texel's
+// material is usually found among its nearest donors).
+constexpr int kMaxTransferCandidates = 4;
+
+struct LobeTransferStats {
+  size_t recipients = 0;   // unidentifiable texels with enough samples
+  size_t no_donor = 0;     // no donor in the window within the albedo tolerance
+  size_t rejected = 0;     // every candidate contradicted by the recipient's samples
+  size_t transferred = 0;  // took a donor's lobes
+  int rounds = 0;          // rounds run
+};
+
+// Phase 1: for every recipient in `fits` (indexed by texel), its candidate donors (texel
+// indices, closest albedo first). Empty for non-recipients. donor_of[t] >= 0 marks a texel that
+// borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.
+std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
+                                                  const std::vector<TexelFit>& fits,
+                                                  const std::vector<int64_t>& donor_of,
+                                                  const LobeTransferOptions& options,
+                                                  LobeTransferStats* stats);
+
+// Phase 2 for the texels of one chunk: tests each recipient's candidates on its samples and, for
+// the accepted one, overwrites fits[t] (albedo re-fitted, the donor's lobes, lambert_only
+// false) and sets donor_of[t] to the donor. `min_cos_theta` masks grazing samples as the fit did.
+void ApplyLobeTransfer(const TexelSampleChunk& chunk,
+                       const std::vector<std::vector<uint32_t>>& candidates,
+                       const LobeTransferOptions& options, double min_cos_theta, int threads,
+                       std::vector<TexelFit>* fits, std::vector<int64_t>* donor_of,
+                       LobeTransferStats* stats);
+
+}  // namespace reflcap::fit
