@@ -39,7 +39,14 @@ int RunResample(int argc, char** argv) {
   args.AddDouble("min-cos", &options.min_cos,
                  StrCat("n.l and n.v must exceed this, in [0, 1) (default ",
                         resample::kDefaultMinCos, " = cos 81.4 deg)"));
-  args.AddString("backend", &backend, "B", "cpu (default) or vulkan");
+  args.AddString("backend", &backend, "B",
+                 "cpu (default: Embree rays) or vulkan (visibility and cast shadow from depth maps "
+                 "rasterised by Vulkan; exit 3 without a Vulkan device)");
+  args.AddString("device", &options.device, "NAME|INDEX",
+                 "Vulkan device for --backend vulkan (default: automatic)");
+  args.AddFlag("cross-check", &options.cross_check,
+               "with --backend vulkan: also run the Embree tests and write their agreement with "
+               "the Vulkan masks as mask_agreement into resample_report.json");
   args.AddDouble("noise-sigma", &photon_sigma,
                  StrCat("photon noise std at pixel value 1 (default: the capture's "
                         "ground_truth.noise, else ", resample::kDefaultPhotonSigma, ")"));
@@ -66,7 +73,7 @@ int RunResample(int argc, char** argv) {
   if (!std::isnan(read_sigma)) options.read_sigma = read_sigma;
   auto parsed_split = resample::ParseSplit(split);
   auto parsed_backend = resample::ParseBackend(backend);
-  for (const Status& s : {parsed_split.status(), parsed_backend.status(), options.Validate()}) {
+  for (const Status& s : {parsed_split.status(), parsed_backend.status()}) {
     if (!s.ok()) {
       std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
       return kExitUsage;
@@ -74,7 +81,11 @@ int RunResample(int argc, char** argv) {
   }
   options.split = *parsed_split;
   options.backend = *parsed_backend;
-  if (Status s = resample::BackendAvailable(options.backend); !s.ok()) {
+  if (Status s = options.Validate(); !s.ok()) {
+    std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (Status s = resample::BackendAvailable(options.backend, options.device); !s.ok()) {
     return ReportError("resample", s);
   }
 

@@ -14,6 +14,8 @@
 #include "acquire/resample/chunk_writer.h"
 #include "acquire/resample/coverage.h"
 #include "acquire/resample/image_resampler.h"
+#include "acquire/resample/mask_agreement.h"
+#include "acquire/resample/vulkan_masks.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
@@ -181,12 +183,13 @@ const char* SplitSelectionName(SplitSelection split) {
   return "?";
 }
 
-Status BackendAvailable(Backend backend) {
-  if (backend == Backend::kVulkan) {
-    return UnavailableError("--backend vulkan: the Vulkan resampler is not available yet (it "
-                            "comes with the Vulkan issue); use --backend cpu");
-  }
+Status BackendAvailable(Backend backend, const std::string& device) {
+  if (backend == Backend::kVulkan) return VulkanMasksAvailable(device);
   return OkStatus();
+}
+
+const char* BackendName(Backend backend) {
+  return backend == Backend::kVulkan ? "vulkan" : "cpu";
 }
 
 Status ResampleOptions::Validate() const {
@@ -205,13 +208,17 @@ Status ResampleOptions::Validate() const {
   }
   if (chunk_texels == 0) return InvalidArgumentError("chunk_texels must be >= 1");
   if (threads < 0) return InvalidArgumentError("threads must be >= 0");
+  if (cross_check && backend != Backend::kVulkan) {
+    return InvalidArgumentError("--cross-check compares the Vulkan masks with Embree: it needs "
+                                "--backend vulkan");
+  }
   return OkStatus();
 }
 
 StatusOr<ResampleSummary> ResampleCapture(const fs::path& capture_path,
                                           const ResampleOptions& options, const fs::path& out_dir) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());
-  REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend));
+  REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend, options.device));
   REFLCAP_ASSIGN_OR_RETURN(Capture capture, ReadCapture(capture_path));
   REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, nullptr));
   return ResampleCapture(capture, options, out_dir);
@@ -221,7 +228,6 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                           const fs::path& out_dir) {
   const auto start = Clock::now();
   REFLCAP_RETURN_IF_ERROR(options.Validate());
-  REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend));
   const std::string file = original.json_path.string();
   REFLCAP_ASSIGN_OR_RETURN(NoiseChoice noise, ChooseNoiseModel(original, options));
   // An image without its own saturation level clips at the capture's ground_truth.noise one.
@@ -232,6 +238,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
 
   // ---- Geometry -------------------------------------------------------------------------------
   TexelAtlas atlas;
+  TriangleMesh mesh_data;
   std::unique_ptr<RayScene> scene;
   std::string atlas_source;
   const bool normal_map = capture.normal_map.has_value();
@@ -242,6 +249,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     AtlasSize(capture, options.atlas_resolution, &w, &h, &atlas_source);
     REFLCAP_ASSIGN_OR_RETURN(atlas, BuildTexelAtlas(*mesh, w, h));
     REFLCAP_ASSIGN_OR_RETURN(scene, RayScene::Create(*mesh));
+    mesh_data = std::move(*mesh);
   } else {
     if (options.atlas_resolution > 0) {
       REFLCAP_LOG(kWarning) << "--atlas-res is ignored: the texels of a normal-map capture are its "
@@ -271,6 +279,25 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<ImageResampler> resampler,
                            ImageResampler::Create(capture, atlas, scene.get(), noise.model,
                                                   options.min_cos, options.threads));
+  // The Vulkan masks replace the Embree path for mesh captures (a normal-map capture casts no
+  // ray: it runs the CPU path under either backend).
+  std::unique_ptr<VulkanMasks> masks;
+  std::string device = "cpu";
+  if (options.backend == Backend::kVulkan && !normal_map) {
+    VulkanMaskOptions mo;
+    mo.device = options.device;
+    REFLCAP_ASSIGN_OR_RETURN(masks, VulkanMasks::Create(capture, atlas, mesh_data,
+                                                        scene->SurfaceOffset(), noise.model,
+                                                        options.min_cos, mo));
+    device = masks->device_name();
+  } else if (options.backend == Backend::kVulkan) {
+    REFLCAP_LOG(kWarning) << "--backend vulkan: a normal-map capture casts no ray (every texel is "
+                             "visible and unshadowed); resampling it on the CPU";
+  }
+  const bool cross_check = options.cross_check && masks != nullptr;
+  MaskAgreement agreement;
+  double gpu_s = 0, cross_check_s = 0;
+  VulkanMaskStats mask_stats;
 
   // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
   std::map<std::pair<int, double>, int> view_ids;
@@ -314,7 +341,8 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   };
   Progress progress("resample", int64_t(order.size()));
   std::future<StatusOr<Image>> next = read_image(order[0].second);
-  ImageOutput output;
+  ImageOutput output, embree_output;
+  CameraMapView camera_map;
   for (size_t k = 0; k < order.size(); ++k) {
     const uint32_t index = order[k].second;
     auto t0 = Clock::now();
@@ -326,8 +354,22 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                     StrCat(file, ": images[", index, "].file: ", pixels.status().message()));
     }
     t0 = Clock::now();
-    REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output));
+    if (masks != nullptr) {
+      REFLCAP_RETURN_IF_ERROR(
+          masks->Process(index, *pixels, &output, cross_check ? &camera_map : nullptr));
+      gpu_s += masks->last_stats().gpu_seconds;
+      mask_stats = masks->last_stats();
+    } else {
+      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output));
+    }
     resample_s += Seconds(t0);
+    if (cross_check) {
+      t0 = Clock::now();
+      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &embree_output));
+      agreement.Add(atlas.position, embree_output.outcome, output.outcome, embree_output.kept,
+                    output.kept, camera_map);
+      cross_check_s += Seconds(t0);
+    }
     t0 = Clock::now();
     for (uint8_t o : output.outcome) ++outcome_counts[o];
     primary_rays += output.primary_rays;
@@ -341,6 +383,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   progress.Finish();
   output = ImageOutput();
+  embree_output = ImageOutput();
 
   auto t0 = Clock::now();
   const uint64_t spilled_bytes = writer->spilled_bytes();
@@ -476,12 +519,20 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   Json report = {
       {"format", "reflcap-resample-report/1"},
       {"capture", info.capture},
-      {"backend", "cpu"},
+      {"backend", BackendName(masks != nullptr ? Backend::kVulkan : Backend::kCpu)},
+      {"backend_requested", BackendName(options.backend)},
+      {"device", device},
       {"split", info.split},
       {"geometry", info.geometry},
       {"visibility", normal_map
                          ? "not tested: a normal-map capture has no mesh, so every texel counts as "
                            "visible and unshadowed (no occlusion, shadow or footprint rays)"
+                     : masks != nullptr
+                         ? "Vulkan depth maps: camera map (the mesh rasterised from the camera: "
+                           "distance, hit, lit per pixel ray) and light map (cube, fitted frustum "
+                           "or orthographic box), receiver-plane depth with a slope-scaled bias; "
+                           "footprint: each bilinear tap's camera-map texel must be the texel's "
+                           "lit surface"
                          : "Embree occlusion rays texel->camera and texel->light; footprint: the "
                            "camera ray through each bilinear tap must hit the texel's lit surface"},
       {"min_cos", options.min_cos},
@@ -556,6 +607,46 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                 "min_half_angle_deg (90 without samples), observations (images "
                                 "showing it lit), samples, seen (0/1), views (distinct camera x "
                                 "turntable poses with a sample)"}}}};
+  if (masks != nullptr) {
+    report["vulkan"] = {{"light_map", mask_stats.light_map},
+                        {"light_map_resolution", mask_stats.light_resolution},
+                        {"camera_map", {mask_stats.map_width, mask_stats.map_height}},
+                        {"gpu_s", gpu_s},
+                        {"note", "gpu_s: submit + fence wait of the per-photograph submissions "
+                                 "(light map, camera map, per-texel tests); on lavapipe the "
+                                 "'GPU' is the CPU"}};
+  }
+  if (cross_check) {
+    const uint64_t disagreeing = agreement.disagreeing();
+    report["mask_agreement"] = {
+        {"pairs_compared", agreement.pairs},
+        {"agreeing", agreement.agreeing},
+        {"agreeing_fraction", agreement.AgreeingFraction()},
+        {"disagreeing", disagreeing},
+        {"disagreements",
+         {{"visible_only_on_vulkan", agreement.visible_only_vulkan},
+          {"visible_only_on_embree", agreement.visible_only_embree},
+          {"lit_only_on_vulkan", agreement.lit_only_vulkan},
+          {"lit_only_on_embree", agreement.lit_only_embree},
+          {"footprint_ok_only_on_vulkan", agreement.footprint_only_vulkan},
+          {"footprint_ok_only_on_embree", agreement.footprint_only_embree},
+          {"other", agreement.other}}},
+        {"near_edge", agreement.near_edge},
+        {"near_edge_fraction",
+         disagreeing ? double(agreement.near_edge) / double(disagreeing) : 1.0},
+        {"kept_by_both", agreement.kept_both},
+        {"max_value_relative_difference", agreement.max_value_rel_diff},
+        {"max_weight_relative_difference", agreement.max_weight_rel_diff},
+        {"max_direction_difference", agreement.max_direction_diff},
+        {"cross_check_s", cross_check_s},
+        {"definition",
+         StrCat("a (texel, image) pair agrees when Embree's rays and the Vulkan masks give it the "
+                "same outcome; a disagreement is classed by the first mask that differs (visible, "
+                "lit, footprint), 'other' when a grazing/projection test or a pixel test differs "
+                "by float rounding; near_edge: a depth discontinuity (hit next to background, or "
+                "a distance jump > ", kDepthJumpFootprints, " pixel footprints) or a shadow edge "
+                "lies within ", kNearEdgePixels, " camera-map texels of the texel's projection")}};
+  }
   const std::string report_text = report.dump(2) + "\n";
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "resample_report.json", report_text));
 
@@ -596,6 +687,20 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                 domain["cells_per_texel"]["p50"].get<double>(), kDomainCells,
                 100.0 * near_json["5"].get<double>());
   text << line;
+  if (masks != nullptr) {
+    std::snprintf(line, sizeof line, "  backend vulkan on %s (light map: %s, %d px)\n",
+                  device.c_str(), mask_stats.light_map.c_str(), mask_stats.light_resolution);
+    text << line;
+  }
+  if (cross_check) {
+    std::snprintf(line, sizeof line,
+                  "  mask agreement with Embree: %.3f %% of %llu pairs; %llu disagreements, "
+                  "%llu of them within %d px of a depth or shadow edge\n",
+                  100.0 * agreement.AgreeingFraction(), (unsigned long long)agreement.pairs,
+                  (unsigned long long)agreement.disagreeing(),
+                  (unsigned long long)agreement.near_edge, kNearEdgePixels);
+    text << line;
+  }
   summary.text = text.str();
   return summary;
 }

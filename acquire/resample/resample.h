@@ -5,8 +5,8 @@
 // store (engine/texel/sample_store.h) so a fitter reads each texel's data once, in one place.
 //
 // ResampleCapture reads the capture, builds the atlas (and the Embree scene of a mesh), runs
-// ImageResampler on one photograph at a time (the next one is read while the current one is
-// resampled), streams the kept samples through ChunkedSampleWriter, and writes the store, the
+// ImageResampler — or, with Backend::kVulkan, its GPU twin VulkanMasks (vulkan_masks.h) — on one
+// photograph at a time (the next one is read while the current one is resampled), streams the kept samples through ChunkedSampleWriter, and writes the store, the
 // report and the coverage maps:
 //
 //   store.json, atlas.bin, chunk_NNNNN.rcs   the sample store
@@ -42,8 +42,11 @@ StatusOr<Backend> ParseBackend(const std::string& name);
 // "train" / "holdout" / "all"; InvalidArgument otherwise.
 StatusOr<SplitSelection> ParseSplit(const std::string& name);
 const char* SplitSelectionName(SplitSelection split);
-// OK for kCpu; Unavailable for kVulkan until the Vulkan resampler lands.
-Status BackendAvailable(Backend backend);
+// OK for kCpu; for kVulkan OK when a Vulkan device matching `device` ("" = any; an index or a
+// piece of its name) with a graphics queue can be opened, else Unavailable saying why (no
+// driver, no device, or a build without Vulkan).
+Status BackendAvailable(Backend backend, const std::string& device = "");
+const char* BackendName(Backend backend);
 
 // cos 81.4°. Below it a sample carries more geometric error than reflectance: a 1° error in the
 // normal changes cos θ by tan θ · 1.7 % = 11 % of itself, and a pixel's footprint on the surface
@@ -74,7 +77,14 @@ struct ResampleOptions {
   SplitSelection split = SplitSelection::kTrain;
   // Both n·l and n·v (shading normal) must exceed it. Range [0, 1).
   double min_cos = kDefaultMinCos;
+  // kCpu: Embree rays (image_resampler.h). kVulkan: the Vulkan masks (vulkan_masks.h) for mesh
+  // captures; a normal-map capture casts no ray, so it runs the CPU path under either backend.
   Backend backend = Backend::kCpu;
+  // Vulkan device for kVulkan: "" = automatic, an index, or a piece of its name.
+  std::string device;
+  // kVulkan only: also run the Embree tests on every photograph and write `mask_agreement`
+  // (mask_agreement.h) into the report; the store holds the Vulkan path's samples.
+  bool cross_check = false;
   // Noise model overrides, each in [0, 1]; unset = from the capture's ground_truth.noise, else
   // kDefaultPhotonSigma / kDefaultReadSigma.
   std::optional<double> photon_sigma;
@@ -102,7 +112,8 @@ struct ResampleSummary {
 // Resamples the capture at `capture_path` (capture.json or its folder) into `out_dir`, which
 // must exist (the caller stages it: nothing is written anywhere else). Errors: those of
 // ReadCapture/ValidateCaptureFiles and of reading images (naming capture.json and the field),
-// Unavailable for Backend::kVulkan, InvalidArgument for bad options.
+// Unavailable for Backend::kVulkan without a usable Vulkan device, InvalidArgument for bad
+// options.
 StatusOr<ResampleSummary> ResampleCapture(const std::filesystem::path& capture_path,
                                           const ResampleOptions& options,
                                           const std::filesystem::path& out_dir);

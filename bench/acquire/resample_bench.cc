@@ -10,6 +10,13 @@
 // the ground-truth BRDF (median relative error below kMaxMedianError). Counters:
 // texel_image_pairs_per_s, samples_per_s, rays_per_s (all ray kinds), kept_fraction.
 //
+// BM_ResampleImagesVulkan/<texels>: the same photographs through VulkanMasks::Process
+// (`--backend vulkan`: light map, camera map and per-texel tests on the Vulkan device; on lavapipe
+// that is the CPU). Verified first against the CPU path on every photograph: the same outcome for
+// at least kMinAgreement of the pairs and equal values (kMaxValueDiff) for the samples both keep.
+// Counters as BM_ResampleImages, plus agreement and gpu_s_per_image (submit + fence wait). The
+// device name is printed in the benchmark's label.
+//
 // BM_ResampleCapture: ResampleCapture end to end (reading images, resampling, reorder, store,
 // maps, report) on the same capture. Counter: texel_image_pairs_per_s.
 //
@@ -23,12 +30,15 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <random>
 
 #include "acquire/resample/image_resampler.h"
+#include "acquire/resample/mask_agreement.h"
+#include "acquire/resample/vulkan_masks.h"
 #include "acquire/resample/resample.h"
 #include "acquire/synth/synth.h"
 #include "engine/brdf/lafortune.h"
@@ -46,6 +56,11 @@ namespace fs = std::filesystem;
 
 // Noise-free samples against the ground truth (see resample_test.cc for why ~1e-3 at 256 px).
 constexpr double kMaxMedianError = 2e-3;
+// The Vulkan path against the CPU path (the acceptance bar of tests/acquire/resample/
+// vulkan_masks_test.cc): the same outcome for this fraction of pairs, values within this relative
+// difference for the samples both keep.
+constexpr double kMinAgreement = 0.995;
+constexpr double kMaxValueDiff = 1e-4;
 
 // A temporary folder removed at exit.
 struct TempDir {
@@ -162,6 +177,58 @@ void BM_ResampleImages(benchmark::State& state) {
   state.counters["kept_fraction"] = double(kept) / double(pairs);
 }
 BENCHMARK(BM_ResampleImages)->Arg(20000)->Arg(150000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_ResampleImagesVulkan(benchmark::State& state) {
+  const Loaded* c = GetCapture(int(state.range(0)), state);
+  if (c == nullptr) return;
+  NoiseModel noise;  // noise-free capture
+  auto resampler = ImageResampler::Create(c->capture, c->atlas, c->scene.get(), noise, kDefaultMinCos);
+  VulkanMaskOptions options;
+  if (const char* device = std::getenv("REFLCAP_BENCH_VK_DEVICE")) options.device = device;
+  auto masks = VulkanMasks::Create(c->capture, c->atlas, c->mesh, c->scene->SurfaceOffset(), noise,
+                                   kDefaultMinCos, options);
+  if (!resampler.ok() || !masks.ok()) {
+    state.SkipWithError((!masks.ok() ? masks.status() : resampler.status()).ToString().c_str());
+    return;
+  }
+  // Verify once: the CPU path's outcomes and values.
+  ImageOutput cpu, out;
+  CameraMapView map;
+  MaskAgreement agreement;
+  for (size_t k = 0; k < c->train.size(); ++k) {
+    if (!(*resampler)->Process(c->train[k], c->images[k], &cpu).ok() ||
+        !(*masks)->Process(c->train[k], c->images[k], &out, &map).ok()) {
+      state.SkipWithError("Process failed");
+      return;
+    }
+    agreement.Add(c->atlas.position, cpu.outcome, out.outcome, cpu.kept, out.kept, map);
+  }
+  state.counters["agreement"] = agreement.AgreeingFraction();
+  if (!(agreement.AgreeingFraction() >= kMinAgreement) ||
+      !(agreement.max_value_rel_diff <= kMaxValueDiff)) {
+    state.SkipWithError("verification failed: the Vulkan masks disagree with the CPU path");
+    return;
+  }
+  uint64_t pairs = 0, kept = 0, images = 0;
+  double gpu_s = 0;
+  for (auto _ : state) {
+    for (size_t k = 0; k < c->train.size(); ++k) {
+      (void)(*masks)->Process(c->train[k], c->images[k], &out);
+      pairs += c->atlas.TexelCount();
+      kept += out.kept.size();
+      gpu_s += (*masks)->last_stats().gpu_seconds;
+      ++images;
+    }
+  }
+  state.SetLabel((*masks)->device_name() + ", light map " + (*masks)->last_stats().light_map + " " +
+                 std::to_string((*masks)->last_stats().light_resolution));
+  state.counters["texels"] = double(c->atlas.TexelCount());
+  state.counters["texel_image_pairs_per_s"] = benchmark::Counter(double(pairs), benchmark::Counter::kIsRate);
+  state.counters["samples_per_s"] = benchmark::Counter(double(kept), benchmark::Counter::kIsRate);
+  state.counters["kept_fraction"] = double(kept) / double(pairs);
+  state.counters["gpu_s_per_image"] = images ? gpu_s / double(images) : 0.0;
+}
+BENCHMARK(BM_ResampleImagesVulkan)->Arg(20000)->Arg(150000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_ResampleCapture(benchmark::State& state) {
   const Loaded* c = GetCapture(int(state.range(0)), state);

@@ -1,0 +1,38 @@
+#version 460
+// Fragment stage of the camera pass of the Vulkan masks: the "pixel map" of the CPU path
+// (ImageResampler::CastPixels) for every camera-map texel at once. At each texel centre it stores
+// what the camera ray through it hits: the distance along the ray (|p - centre| for a pinhole
+// camera, the depth p_cam.z for an orthographic one) and whether that point is lit as the
+// renderer decides it — both normals face the light and the light map holds no occluder
+// (LightShadowed) — and marks the texel as a hit. The depth test (LESS, on the projective depth)
+// keeps the nearest surface, as the CPU's first hit.
+//
+// Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[] (vertex stage), 2 = triangle normals,
+// 3 = light map. Push constants: MaskDrawPush {view = kMaskCameraView}.
+// Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, 0); the clear value 0 = background.
+#extension GL_GOOGLE_include_directive : require
+
+#define REFLCAP_MASK_TRIANGLES
+#define REFLCAP_MASK_LIGHT_MAP
+#include "resample/masks_common.glsl"
+
+layout(push_constant) uniform Push { MaskDrawPush push; };
+
+layout(location = 0) in vec3 in_position;
+layout(location = 1) in vec3 in_normal;
+layout(location = 0) out vec4 out_map;
+
+void main() {
+  vec3 p = in_position;
+  vec3 centre = params.camera_centre.xyz;
+  float distance = (params.flags & kMaskFlagPinhole) != 0u ? length(p - centre)
+                                                           : dot(p - centre, -params.toward_cam.xyz);
+  vec3 n_g = triangle_normals[gl_PrimitiveID].xyz;
+  // A degenerate interpolated normal (opposite corner normals) cannot face the light.
+  float len = length(in_normal);
+  vec3 n_s = len > 0.0 ? in_normal / len : vec3(0.0);
+  float dist;
+  vec3 wi = ToLight(p, dist);
+  bool lit = dot(n_s, wi) > 0.0 && dot(n_g, wi) > 0.0 && !LightShadowed(p, n_g);
+  out_map = vec4(distance, lit ? 1.0 : 0.0, 1.0, 0.0);
+}
