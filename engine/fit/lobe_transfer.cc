@@ -8,6 +8,7 @@
 #include "engine/brdf/lafortune.h"
 #include "engine/core/check.h"
 #include "engine/core/parallel.h"
+#include "engine/fit/problem.h"
 
 namespace reflcap::fit {
 
@@ -113,6 +114,20 @@ double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSamp
   return cost;
 }
 
+// The largest value the lobes of `p` reach in channel c over the hemisphere: per lobe
+// max(|Cx|, |Cy|, Cz)^n (the base's supremum over unit wi, wo with z >= 0), summed.
+double LobeSupremum(const brdf::BrdfParams& p, int c) {
+  double sum = 0;
+  for (int k = 0; k < p.num_lobes; ++k) {
+    const brdf::LobeParams& l = p.lobes[k][c];
+    const double c_max = std::max({std::abs(double(l.cx)), std::abs(double(l.cy)), double(l.cz)});
+    if (c_max <= 0) continue;
+    // Capped as LafortuneLobe caps a value: exp of a huge argument must not overflow.
+    sum += std::exp(std::min(double(l.n) * std::log(c_max), std::log(brdf::kMaxLobeValue)));
+  }
+  return sum;
+}
+
 }  // namespace
 
 std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
@@ -180,10 +195,26 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk,
       for (size_t k = 0; k < count; ++k) usable[k] = Prepare(samples[k], min_cos_theta);
       std::array<float, brdf::kChannels> rho{};
       const double lambert_cost = RefitAlbedoCost(samples, count, usable.data(), nullptr, &rho);
+      // The evidence bound of the texel's own fit (problem.h kMaxLobeSupremum): a lobe may rise
+      // at most 10x above the brightest value the texel showed, per channel.
+      std::array<double, brdf::kChannels> brightest{};
+      for (size_t k = 0; k < count; ++k) {
+        if (!usable[k].usable) continue;
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          const float w = samples[k].weight[c], y = samples[k].value[c];
+          if (w > 0 && std::isfinite(w) && std::isfinite(y)) brightest[c] = std::max(brightest[c], double(y));
+        }
+      }
       double best_cost = lambert_cost + options.max_cost_increase;
       int64_t best = -1;
       std::array<float, brdf::kChannels> best_rho{};
       for (uint32_t donor : candidates[t]) {
+        bool within_evidence = true;
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          within_evidence = within_evidence && LobeSupremum((*fits)[donor].params, c) <=
+                                                   kMaxLobeSupremum * brightest[c];
+        }
+        if (!within_evidence) continue;
         const double cost =
             RefitAlbedoCost(samples, count, usable.data(), &(*fits)[donor].params, &rho);
         if (std::isfinite(cost) && cost <= best_cost) {

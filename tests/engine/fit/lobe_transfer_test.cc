@@ -13,13 +13,15 @@
 namespace reflcap::fit {
 namespace {
 
-// The glossy material every test uses: albedo (0.4, 0.3, 0.2) and a mirror lobe of peak 5 / sr,
-// n = 40 (half-width ~11 degrees).
-brdf::BrdfParams Glossy(float scale = 1) {
+// The glossy material the tests use: albedo (0.4, 0.3, 0.2) and a mirror lobe of peak `peak` / sr,
+// n = 40 (half-width ~11 degrees). Peak 0.5 stays within the transfer's evidence bound (10x the
+// recipient's brightest sample per channel: blue, the darkest, shows 0.2 / pi = 0.064 / sr off the
+// highlight); peak 5 exceeds it.
+brdf::BrdfParams Glossy(double peak = 0.5) {
   brdf::BrdfParams p;
   p.num_lobes = 1;
-  p.rho_d = {0.4f * scale, 0.3f * scale, 0.2f * scale};
-  for (int c = 0; c < brdf::kChannels; ++c) p.lobes[0][c] = brdf::MirrorLobe(5.0, 40.0);
+  p.rho_d = {0.4f, 0.3f, 0.2f};
+  for (int c = 0; c < brdf::kChannels; ++c) p.lobes[0][c] = brdf::MirrorLobe(peak, 40.0);
   return p;
 }
 
@@ -127,7 +129,7 @@ TEST(LobeTransfer, ASimilarNeighboursLobeIsLentWhenTheSamplesAgree) {
 
 TEST(LobeTransfer, SamplesThatContradictTheLobeRefuseIt) {
   // The recipient is matte (no lobe at all) but its albedo matches the glossy donor's, and one
-  // of its samples sits on the mirror direction, where the donor's lobe would add 5 / sr.
+  // of its samples sits on the mirror direction, where the donor's lobe would add 0.5 / sr.
   brdf::BrdfParams matte = Glossy();
   for (int c = 0; c < 3; ++c) matte.lobes[0][c] = {0, 0, 0, 20};
   std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit({0.4f, 0.3f, 0.2f})};
@@ -143,6 +145,23 @@ TEST(LobeTransfer, SamplesThatContradictTheLobeRefuseIt) {
   EXPECT_EQ(donor[1], -1);
   EXPECT_TRUE(fits[1].lambert_only);
   EXPECT_EQ(fits[1].params.lobes[0][0].cx, 0.0f);
+}
+
+TEST(LobeTransfer, ALobeFarAboveTheRecipientsBrightestSampleIsRefused) {
+  // The same material with a lobe of peak 5 / sr: 40-80x the recipient's brightest samples (it never
+  // saw the highlight), beyond the evidence bound a texel's own fit is held to (problem.h).
+  const brdf::BrdfParams bright = Glossy(5.0);
+  std::vector<TexelFit> fits = {DonorFit(bright), RecipientFit({0.4f, 0.3f, 0.2f})};
+  LobeTransferOptions options;
+  LobeTransferStats stats;
+  const auto candidates = FindLobeDonors(LineAtlas(2), fits, NoneBorrowed(2), options, &stats);
+  ASSERT_EQ(candidates[1].size(), 1u);
+  const TexelSampleChunk chunk = Chunk({Samples(bright, true), Samples(bright, false)});
+  std::vector<int64_t> donor(2, -1);
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &stats);
+  EXPECT_EQ(stats.rejected, 1u);
+  EXPECT_EQ(donor[1], -1);
+  EXPECT_TRUE(fits[1].lambert_only);
 }
 
 TEST(LobeTransfer, DisabledOrOutOfReachDoesNothing) {
