@@ -61,6 +61,7 @@ int RunRender(int argc, char** argv);    // verb_render.cc
 int RunValidate(int argc, char** argv);  // verb_validate.cc
 int RunImportDiligent(int argc, char** argv);  // verb_import_diligent.cc
 int RunRun(int argc, char** argv);       // verb_run.cc
+int RunBench(int argc, char** argv);     // verb_bench.cc
 
 
 }  // namespace reflcap::cli

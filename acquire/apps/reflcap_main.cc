@@ -21,6 +21,7 @@ constexpr char kUsage[] =
     "  run CAPTURE --out DIR            resample -> fit -> render holdout -> validate\n"
     "  validate CAPTURE RENDERS --out REPORT   compare re-renders with photographs\n"
     "  import-diligent OBJECT_DIR --out CAPTURE   DiLiGenT object -> capture/1\n"
+    "  bench --out DIR [--quick]        benchmark matrix: speed, error, scaling, viewpoints\n"
     "\n"
     "global options: --quiet (warnings and errors only), --version\n"
     "exit codes: 0 ok, 1 usage error, 2 bad input, 3 backend unavailable, 4 internal error\n";
@@ -58,6 +59,7 @@ int main(int argc, char** argv) {
   if (verb == "run") return cli::RunRun(argc, argv);
   if (verb == "validate") return cli::RunValidate(argc, argv);
   if (verb == "import-diligent") return cli::RunImportDiligent(argc, argv);
+  if (verb == "bench") return cli::RunBench(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }
