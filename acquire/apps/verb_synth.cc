@@ -14,7 +14,7 @@ namespace reflcap::cli {
 namespace fs = std::filesystem;
 namespace {
 
-void AddSynthOptions(ArgParser* args, synth::SynthOptions* o) {
+void AddSynthOptions(ArgParser* args, synth::SynthOptions* o, std::string* materials) {
   args->AddString("preset", &o->preset, "NAME", "small (default), medium, or million (>= 1e6 texels)");
   args->AddUint64("seed", &o->seed, "random seed of object relief, materials and noise (default 1)");
   args->AddDouble("noise", &o->noise,
@@ -26,6 +26,21 @@ void AddSynthOptions(ArgParser* args, synth::SynthOptions* o) {
   args->AddInt("lights", &o->lights, "point lights (default: preset)");
   args->AddInt("steps", &o->steps, "turntable steps over 360 degrees (default: preset)");
   args->AddInt("supersample", &o->supersampling, "N x N samples per pixel (default 1)");
+  args->AddString("materials", materials, "LIST",
+                  "comma-separated subset of matte, glossy, sharp_highlight, anisotropic, "
+                  "coloured_texture, coloured_lobe (default: all six)");
+}
+
+// "a,b" -> {"a", "b"}; empty items are kept, so Validate names them.
+std::vector<std::string> SplitList(const std::string& list) {
+  std::vector<std::string> items;
+  if (list.empty()) return items;
+  size_t start = 0;
+  for (size_t comma; (comma = list.find(',', start)) != std::string::npos; start = comma + 1) {
+    items.push_back(list.substr(start, comma - start));
+  }
+  items.push_back(list.substr(start));
+  return items;
 }
 
 StatusOr<synth::SynthSummary> Synthesize(const synth::SynthOptions& options, const fs::path& out,
@@ -52,7 +67,7 @@ void PrintSummary(const synth::SynthSummary& s, const fs::path& out) {
 
 int RunSynth(int argc, char** argv) {
   synth::SynthOptions options;
-  std::string out;
+  std::string out, materials;
   bool overwrite = false;
   ArgParser args("synth", "--out DIR [options]",
                  "Write a complete synthetic capture/1 dataset with ground truth: a relief object\n"
@@ -60,7 +75,7 @@ int RunSynth(int argc, char** argv) {
                  "seed paper's turntable rig with a holdout split, rendered by the CPU reference\n"
                  "renderer with photon + read noise.");
   args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
-  AddSynthOptions(&args, &options);
+  AddSynthOptions(&args, &options, &materials);
   args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
@@ -75,6 +90,7 @@ int RunSynth(int argc, char** argv) {
     std::fprintf(stderr, "reflcap synth: --out DIR is required\n");
     return kExitUsage;
   }
+  options.materials = SplitList(materials);
   if (Status s = options.Validate(); !s.ok()) {
     std::fprintf(stderr, "reflcap synth: %s\n", s.message().c_str());
     return kExitUsage;

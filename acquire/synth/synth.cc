@@ -1,7 +1,9 @@
 // Synthetic capture generator (see synth.h).
 #include "acquire/synth/synth.h"
 
+#include <algorithm>
 #include <chrono>
+#include <iterator>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -165,9 +167,19 @@ namespace {
 // ---- Materials -------------------------------------------------------------------------------
 
 enum Material { kMatte, kGlossy, kSharp, kAnisotropic, kTextured, kMetallic, kMaterialCount };
-constexpr const char* kMaterialNames[kMaterialCount] = {"matte", "glossy", "sharp_highlight",
-                                                        "anisotropic", "coloured_texture",
-                                                        "coloured_lobe"};
+const char* const* kMaterialNames = kSynthMaterialNames;
+
+// The material ids options.materials names (all of them when it is empty); names are checked by
+// SynthOptions::Validate.
+std::vector<int> SelectedMaterials(const std::vector<std::string>& names) {
+  std::vector<int> ids;
+  for (int m = 0; m < kMaterialCount; ++m) {
+    if (names.empty() || std::find(names.begin(), names.end(), kMaterialNames[m]) != names.end()) {
+      ids.push_back(m);
+    }
+  }
+  return ids;
+}
 
 // Normalised-Phong-like peak for a lobe of specular albedo ks: ks (n + 2) / (2π).
 double Peak(double ks, double n) { return ks * (n + 2) / (2 * kPi); }
@@ -220,7 +232,18 @@ double Spread(int i, int count, double lo, double hi) {
 
 }  // namespace
 
+const char* const kSynthMaterialNames[6] = {"matte", "glossy", "sharp_highlight", "anisotropic",
+                                            "coloured_texture", "coloured_lobe"};
+
 Status SynthOptions::Validate() const {
+  for (const std::string& name : materials) {
+    if (std::find(std::begin(kSynthMaterialNames), std::end(kSynthMaterialNames), name) ==
+        std::end(kSynthMaterialNames)) {
+      return InvalidArgumentError("--materials: unknown material \"", name,
+                                  "\" (matte, glossy, sharp_highlight, anisotropic, "
+                                  "coloured_texture, coloured_lobe)");
+    }
+  }
   bool known = false;
   for (const auto& p : kPresets) known |= preset == p.name;
   if (!known) return InvalidArgumentError("--preset: unknown preset \"", preset, "\" (small, medium, million)");
@@ -277,6 +300,7 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
   gt.texels.resize(atlas.TexelCount());
   Image material_map(atlas.width, atlas.height, 1, 0.0f);
   std::vector<size_t> material_texels(kMaterialCount, 0);
+  const std::vector<int> selected = SelectedMaterials(options.materials);
   for (size_t t = 0; t < atlas.TexelCount(); ++t) {
     const Vec3d p = atlas.position[t].cast<double>();
     const Vec3d d = (p - centre).normalized();
@@ -284,7 +308,7 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
     for (int i = 1; i < int(sites.size()); ++i) {
       if (d.dot(sites[i]) > d.dot(sites[best])) best = i;
     }
-    const int material = best % kMaterialCount;
+    const int material = selected[size_t(best) % selected.size()];
     gt.texels[t] = MaterialParams(material, p);
     material_map.data[atlas.pixel_of_texel[t]] = float(material + 1);
     ++material_texels[material];

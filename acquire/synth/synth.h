@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "engine/core/status.h"
 #include "engine/mesh/mesh.h"
@@ -36,9 +37,15 @@ struct SynthOptions {
   int lights = 0;         // point lights
   int steps = 0;          // turntable steps over 360°
   int supersampling = 1;  // N x N samples per pixel in the renderer
+  // The materials the object's regions draw from, by name (kSynthMaterialNames); empty = all six.
+  // A subset makes a capture of only what a test or benchmark needs (e.g. no sharp highlight).
+  std::vector<std::string> materials;
 
   Status Validate() const;
 };
+
+// "matte", "glossy", "sharp_highlight", "anisotropic", "coloured_texture", "coloured_lobe".
+extern const char* const kSynthMaterialNames[6];
 
 // Read noise relative to photon noise at value 1: a dark pixel (value 0.04) sees equal parts.
 constexpr double kReadNoiseRatio = 0.2;

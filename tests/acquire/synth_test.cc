@@ -143,6 +143,31 @@ TEST(Synth, RejectsBadOptions) {
   o = SynthOptions();
   o.supersampling = 99;
   EXPECT_FALSE(o.Validate().ok());
+  o = SynthOptions();
+  o.materials = {"glossy", "velvet"};
+  const Status bad_material = o.Validate();
+  EXPECT_FALSE(bad_material.ok());
+  EXPECT_NE(bad_material.message().find("velvet"), std::string::npos) << bad_material.message();
+}
+
+TEST(Synth, MaterialsSubsetIsAllTheObjectIsMadeOf) {
+  testing::ScratchDir dir;
+  SynthOptions o = TinyOptions();
+  o.steps = 1;
+  o.lights = 1;
+  o.materials = {"matte", "coloured_texture"};
+  auto summary = WriteSyntheticCapture(o, dir / "c");
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  std::vector<std::string> names;
+  auto material = ReadExrChannels(dir / "c" / "gt" / "material.exr", &names);
+  ASSERT_TRUE(material.ok()) << material.status().ToString();
+  // Material ids are 1-based in kSynthMaterialNames order (0 = no texel): matte 1, texture 5.
+  std::map<int, size_t> seen;
+  for (size_t p = 0; p < material->PixelCount(); ++p) ++seen[int(material->data[p * material->channels])];
+  seen.erase(0);
+  ASSERT_EQ(seen.size(), 2u);
+  EXPECT_GT(seen[1], 0u);
+  EXPECT_GT(seen[5], 0u);
 }
 
 }  // namespace
