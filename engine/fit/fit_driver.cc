@@ -127,15 +127,17 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   LobeTransferStats transfer;
   std::vector<int64_t> lobe_donor(info.texels, -1);
   if (options.lobe_transfer.enabled && options.lobes > 0) {
+    std::vector<uint8_t> lenders;  // round >= 1: the texels that borrowed in the last round
     for (int round = 0; round < options.lobe_transfer.rounds; ++round) {
       LobeTransferStats round_stats;
-      const auto candidates =
-          FindLobeDonors(atlas, fits, lobe_donor, options.lobe_transfer, &round_stats);
+      const auto candidates = FindLobeDonors(atlas, fits, lobe_donor, options.lobe_transfer,
+                                             &round_stats, round == 0 ? nullptr : &lenders);
       if (round == 0) {
         transfer.recipients = round_stats.recipients;
         transfer.no_donor = round_stats.no_donor;
       }
       if (round_stats.no_donor == round_stats.recipients) break;  // no candidate anywhere
+      const std::vector<int64_t> before = lobe_donor;
       for (uint32_t c = 0; c < info.chunks; ++c) {
         // Chunks hold consecutive texels: skip those without a recipient that has candidates.
         const uint64_t first = uint64_t(c) * info.chunk_texels;
@@ -147,10 +149,12 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         ApplyLobeTransfer(chunk, candidates, options.lobe_transfer, options.min_cos_theta,
                           options.threads, &fits, &lobe_donor, &round_stats);
       }
-      transfer.rejected = round_stats.rejected;  // the last round's: still refused at the end
+      if (round == 0) transfer.rejected = round_stats.rejected;
       transfer.transferred += round_stats.transferred;
       ++transfer.rounds;
       if (round_stats.transferred == 0) break;
+      lenders.assign(info.texels, 0);
+      for (size_t t = 0; t < lobe_donor.size(); ++t) lenders[t] = lobe_donor[t] != before[t];
     }
   }
   const double transfer_seconds = Seconds(transfer_start);

@@ -83,7 +83,9 @@ UsableSample Prepare(const BrdfSample& s, double min_cos_theta) {
   return u;
 }
 
-// Per channel: the albedo re-fit with `lobes` fixed (none when `params` is null) and its cost.
+// Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null) and
+// its cost, in one pass: with e = y - lobe, S0 = sum w, S1 = sum w e, S2 = sum w e^2, the
+// least-squares diffuse level is d = max(0, S1 / S0) and the cost 1/2 (S2 - 2 d S1 + d^2 S0).
 double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
                        const brdf::BrdfParams* params, std::array<float, brdf::kChannels>* rho) {
   double cost = 0;
@@ -92,24 +94,21 @@ double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSamp
     if (params) channel = params->Channel(c);
     channel[0] = 0;  // the lobe part only
     const int lobes = params ? params->num_lobes : 0;
-    double sw = 0, swr = 0;
+    double s0 = 0, s1 = 0, s2 = 0;
     for (size_t i = 0; i < count; ++i) {
       const float w = samples[i].weight[c], y = samples[i].value[c];
       if (!usable[i].usable || !(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
-      const double lobe = brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes);
-      sw += w;
-      swr += w * (y - lobe);
+      const double e =
+          y - (lobes ? brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes) : 0.0);
+      s0 += w;
+      s1 += w * e;
+      s2 += w * e * e;
     }
     // No usable residual in this channel: albedo 0, no cost.
-    const double diffuse = sw > 0 ? std::max(0.0, swr / sw) : 0.0;
+    const double diffuse = s0 > 0 ? std::max(0.0, s1 / s0) : 0.0;
     (*rho)[c] = float(diffuse * kPi);
-    for (size_t i = 0; i < count; ++i) {
-      const float w = samples[i].weight[c], y = samples[i].value[c];
-      if (!usable[i].usable || !(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
-      const double lobe = brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes);
-      const double r = diffuse + lobe - y;
-      cost += 0.5 * w * r * r;
-    }
+    // Rounding can leave a tiny negative where the fit is exact; a cost is never below 0.
+    cost += std::max(0.0, 0.5 * (s2 - 2 * diffuse * s1 + diffuse * diffuse * s0));
   }
   return cost;
 }
@@ -134,9 +133,11 @@ std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
                                                   const std::vector<TexelFit>& fits,
                                                   const std::vector<int64_t>& donor_of,
                                                   const LobeTransferOptions& options,
-                                                  LobeTransferStats* stats) {
+                                                  LobeTransferStats* stats,
+                                                  const std::vector<uint8_t>* lenders) {
   REFLCAP_CHECK(fits.size() == atlas.TexelCount());
   REFLCAP_CHECK(donor_of.size() == fits.size());
+  REFLCAP_CHECK(!lenders || lenders->size() == fits.size());
   std::vector<std::vector<uint32_t>> candidates(fits.size());
   if (!options.enabled) return candidates;
   std::vector<int64_t> texel_at(size_t(atlas.width) * atlas.height, -1);
@@ -155,7 +156,7 @@ std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
         for (int x = std::max(0, x0 - options.radius);
              x <= std::min(atlas.width - 1, x0 + options.radius); ++x) {
           const int64_t d = texel_at[size_t(y) * atlas.width + x];
-          if (d < 0 || !IsDonor(fits[d], donor_of[d]) ||
+          if (d < 0 || (lenders && !(*lenders)[d]) || !IsDonor(fits[d], donor_of[d]) ||
               fits[d].params.num_lobes != fits[t].params.num_lobes) {
             continue;
           }

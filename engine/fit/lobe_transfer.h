@@ -25,7 +25,8 @@
 // Rounds: a texel that borrowed a lobe lends it on in the next round, so a lobe spreads through
 // a region of one material as far as the albedo and sample tests let it (region growing), up to
 // `rounds` rounds, each a pass over the chunks that hold recipients with candidates. A round's
-// counts add to the stats; `recipients` and `no_donor` are those of the first round.
+// counts add to the stats in the FIT report; `recipients`, `no_donor` and `rejected` are the first
+// round's, `transferred` the sum over rounds.
 //
 // A matte texel next to a glossy one is protected twice: the albedo test (different materials
 // differ in albedo more often than not), and kUnidentifiableLobe itself — a texel that had a
@@ -63,11 +64,15 @@ struct LobeTransferStats {
 // Phase 1: for every recipient in `fits` (indexed by texel), its candidate donors (texel
 // indices, closest albedo first). Empty for non-recipients. donor_of[t] >= 0 marks a texel that
 // borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.
+// `lenders`, when given, restricts the donors to the texels it marks — the driver passes the
+// texels that borrowed in the previous round, since every other donor was already tested
+// against every recipient in its reach (a recipient they did not convince would refuse again).
 std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
                                                   const std::vector<TexelFit>& fits,
                                                   const std::vector<int64_t>& donor_of,
                                                   const LobeTransferOptions& options,
-                                                  LobeTransferStats* stats);
+                                                  LobeTransferStats* stats,
+                                                  const std::vector<uint8_t>* lenders = nullptr);
 
 // Phase 2 for the texels of one chunk: tests each recipient's candidates on its samples and, for
 // the accepted one, overwrites fits[t] (albedo re-fitted, the donor's lobes, lambert_only
