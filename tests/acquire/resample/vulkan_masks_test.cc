@@ -268,8 +268,12 @@ TEST_F(VulkanMasksTest, AgreeWithEmbreeForCubeOrthographicAndDistortedSetups) {
     // Each setup keeps samples at all (the light just above the top face lights little else).
     EXPECT_GT(kept, agreement.pairs / 100) << "setup " << int(kind);
     EXPECT_GT(shadowed, 0u) << "setup " << int(kind);
-    if (kind == kCubeLight) EXPECT_EQ(light_map, "cube");
-    if (kind == kDirectionalLight) EXPECT_EQ(light_map, "orthographic");
+    if (kind == kCubeLight) {
+      EXPECT_EQ(light_map, "cube");
+    }
+    if (kind == kDirectionalLight) {
+      EXPECT_EQ(light_map, "orthographic");
+    }
   }
 }
 
