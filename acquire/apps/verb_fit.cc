@@ -36,7 +36,8 @@ int RunFit(int argc, char** argv) {
                  "first); with auto it asks for that device");
   args.AddInt("lobes", &options.lobes, "Lafortune lobes per texel, 0..3 (default 1; shared: <= 2)");
   args.AddString("lobe-model", &lobe_model, "MODEL",
-                 "aniso (default), iso (Cx = Cy) or shared (one lobe shape, per-channel scale)");
+                 "aniso (default), iso (Cx = Cy), shared (one lobe shape, per-channel scale), or "
+                 "auto (aniso or iso per texel, the better by BIC)");
   args.AddString("init", &init, "NAME",
                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
@@ -78,7 +79,9 @@ int RunFit(int argc, char** argv) {
     }
     return ReportError("fit", backend.status());
   }
-  auto model = fit::ParseLobeModel(lobe_model);
+  // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
+  const bool auto_model = lobe_model == "auto";
+  auto model = fit::ParseLobeModel(auto_model ? "aniso" : lobe_model);
   auto init_scheme = fit::ParseInitScheme(init);
   auto loss_kind = fit::ParseLossKind(loss);
   for (const Status* s : {&model.status(), &init_scheme.status(), &loss_kind.status()}) {
@@ -88,6 +91,7 @@ int RunFit(int argc, char** argv) {
     }
   }
   options.lobe_model = *model;
+  options.select_lobe_model = auto_model;
   options.lobe_transfer.enabled = !no_lobe_transfer;
   options.init = *init_scheme;
   options.loss = *loss_kind;

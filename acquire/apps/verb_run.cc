@@ -144,7 +144,8 @@ int RunRun(int argc, char** argv) {
                  "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
   args.AddInt("lobes", &options.fit.lobes, "Lafortune lobes per texel, 0..3 (default 1; 0 = Lambert only)");
-  args.AddString("lobe-model", &lobe_model, "MODEL", "aniso (default), iso or shared");
+  args.AddString("lobe-model", &lobe_model, "MODEL",
+                 "aniso (default), iso, shared, or auto (aniso or iso per texel by BIC)");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
   args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
@@ -174,7 +175,9 @@ int RunRun(int argc, char** argv) {
     std::fprintf(stderr, "reflcap run: --out DIR is required\n");
     return kExitUsage;
   }
-  auto model = fit::ParseLobeModel(lobe_model);
+  // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
+  const bool auto_model = lobe_model == "auto";
+  auto model = fit::ParseLobeModel(auto_model ? "aniso" : lobe_model);
   auto init_scheme = fit::ParseInitScheme(init);
   auto loss_kind = fit::ParseLossKind(loss);
   for (const Status& s : {model.status(), init_scheme.status(), loss_kind.status()}) {
@@ -184,6 +187,7 @@ int RunRun(int argc, char** argv) {
     }
   }
   options.fit.lobe_model = *model;
+  options.fit.select_lobe_model = auto_model;
   options.fit.lobe_transfer.enabled = !no_lobe_transfer;
   options.fit.init = *init_scheme;
   options.fit.loss = *loss_kind;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <future>
 
 #include <nlohmann/json.hpp>
@@ -30,6 +31,13 @@ Json Percentiles(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
   return Json{{"p10", at(0.10)}, {"p50", at(0.50)}, {"p90", at(0.90)}, {"p99", at(0.99)}, {"max", v.back()}};
+}
+
+// Bayesian information criterion of a texel's fit: 2 cost (= chi-square in noise units) plus
+// k ln(residuals), k = the free parameters of `model` (3, the albedos, for a Lambert-only fit).
+double Bic(const TexelFit& f, LobeModel model, int lobes) {
+  const int k = f.lambert_only ? 3 : NumParams(model, lobes) * ProblemsPerTexel(model);
+  return 2.0 * double(f.cost) + k * std::log(double(std::max(f.residuals, 1)));
 }
 
 }  // namespace
@@ -98,7 +106,13 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   summary.device = fitter->device();
   Progress progress("fit", info.texels);
   double read_seconds = 0, fit_seconds = 0;
-  std::vector<TexelFit> results;
+  std::vector<TexelFit> results, iso_results;
+  // --lobe-model auto (FitOptions::select_lobe_model): a second, isotropic fit of every chunk.
+  const bool select_model =
+      options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
+  FitOptions iso_options = options;
+  iso_options.lobe_model = LobeModel::kIso;
+  size_t iso_chosen = 0;
   auto read = [&store](uint32_t index) { return store->ReadChunk(index); };
   std::future<StatusOr<TexelSampleChunk>> next;
   if (info.chunks > 0) next = std::async(std::launch::async, read, 0u);
@@ -115,6 +129,16 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     }
     const auto fit_start = std::chrono::steady_clock::now();
     REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, options, &results));
+    if (select_model) {
+      REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, iso_options, &iso_results));
+      for (size_t i = 0; i < results.size(); ++i) {
+        if (Bic(iso_results[i], LobeModel::kIso, options.lobes) <
+            Bic(results[i], LobeModel::kAniso, options.lobes)) {
+          results[i] = iso_results[i];
+          ++iso_chosen;
+        }
+      }
+    }
     fit_seconds += Seconds(fit_start);
     std::copy(results.begin(), results.end(), fits.begin() + chunk->first_texel);
     progress.Advance(chunk->texel_count);
@@ -192,7 +216,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"device", summary.device},
       {"options",
        {{"lobes", options.lobes},
-        {"lobe_model", LobeModelName(options.lobe_model)},
+        {"lobe_model", select_model ? "auto" : LobeModelName(options.lobe_model)},
         {"init", InitSchemeName(options.init)},
         {"loss", LossKindName(options.loss)},
         {"loss_scale", options.loss_scale},
@@ -231,6 +255,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"texels_per_second", fit_seconds > 0 ? info.texels / fit_seconds : 0.0},
   };
   if (!backend_choice.empty()) report["backend_choice"] = backend_choice;
+  if (select_model) report["lobe_model_choice"] = {{"aniso", info.texels - iso_chosen}, {"iso", iso_chosen}};
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);
   report["timings_s"] = {{"read_wait", read_seconds},

@@ -100,6 +100,13 @@ struct FitOptions {
   // aniso (Cx, Cy, Cz, n per channel), iso (Cx = Cy) or shared (one shape, per-channel scale);
   // see model.h.
   LobeModel lobe_model = LobeModel::kAniso;
+  // Per-texel model selection (`--lobe-model auto`; RunFit only, with lobe_model kAniso and
+  // lobes > 0): every texel is fitted both anisotropic and isotropic (Cx = Cy), and keeps the
+  // fit with the lower Bayesian information criterion 2 cost + k ln(residuals), k its free
+  // parameters — the isotropic lobe unless the samples pay for the anisotropic one's extra
+  // parameters. An unneeded Cx != Cy is unconstrained where no sample looked (grazing mirror
+  // configurations) and extrapolates there.
+  bool select_lobe_model = false;
   InitScheme init = InitScheme::kSeed;
   LossKind loss = LossKind::kNone;
   // Robust loss scale a in σ units of the sample weights, > 0. 3: samples more than 3 σ off
