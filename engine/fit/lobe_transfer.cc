@@ -71,8 +71,9 @@ UsableSample Prepare(const BrdfSample& s, double min_cos_theta) {
     ni += double(s.wi[j]) * s.wi[j];
     no += double(s.wo[j]) * s.wo[j];
   }
-  // As problem.h's kMinDirectionNorm: shorter is a zeroed record, longer is re-normalised.
-  if (ni < 0.25 || no < 0.25) return u;
+  // As PrepareTexel: shorter than kMinDirectionNorm is a zeroed record, longer is re-normalised.
+  const double min_norm2 = kMinDirectionNorm * kMinDirectionNorm;
+  if (ni < min_norm2 || no < min_norm2) return u;
   ni = std::sqrt(ni);
   no = std::sqrt(no);
   for (int j = 0; j < 3; ++j) {
@@ -203,7 +204,9 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk,
         if (!usable[k].usable) continue;
         for (int c = 0; c < brdf::kChannels; ++c) {
           const float w = samples[k].weight[c], y = samples[k].value[c];
-          if (w > 0 && std::isfinite(w) && std::isfinite(y)) brightest[c] = std::max(brightest[c], double(y));
+          if (w > 0 && std::isfinite(w) && std::isfinite(y)) {
+            brightest[c] = std::max(brightest[c], double(y));
+          }
         }
       }
       double best_cost = lambert_cost + options.max_cost_increase;
