@@ -18,6 +18,7 @@
 #include "engine/gpu/vk_descriptors.h"
 #include "engine/gpu/vk_graphics_pipeline.h"
 #include "engine/gpu/vk_image.h"
+#include "engine/gpu/vk_view.h"
 #include "shaders/shared/resample_masks.h"
 
 namespace reflcap::resample {
@@ -70,70 +71,17 @@ constexpr double kMaxMapRatio = 4;
 // any minStorageBufferOffsetAlignment (<= 256 bytes by the Vulkan spec; 1024 x 4 bytes).
 constexpr uint64_t kChunkAlignTexels = 1024;
 
-sh::vec4 V4(const Vec3d& v, double w) {
-  return {float(v.x()), float(v.y()), float(v.z()), float(w)};
-}
-
-void SetRows(const Mat4d& m, sh::vec4 rows[4]) {
-  for (int r = 0; r < 4; ++r)
-    rows[r] = {float(m(r, 0)), float(m(r, 1)), float(m(r, 2)), float(m(r, 3))};
-}
+using gpu::Basis;
+using gpu::Homogeneous;
+using gpu::SetRows;
+using gpu::V4;
+using gpu::ViewMatrix;
 
 void SetRigidRows(const Rigid3& t, sh::vec4 rows[3]) {
   for (int r = 0; r < 3; ++r) {
     rows[r] = {float(t.rotation(r, 0)), float(t.rotation(r, 1)), float(t.rotation(r, 2)),
                float(t.translation(r))};
   }
-}
-
-Mat4d Homogeneous(const Rigid3& t) {
-  Mat4d m = Mat4d::Identity();
-  m.topLeftCorner<3, 3>() = t.rotation;
-  m.topRightCorner<3, 1>() = t.translation;
-  return m;
-}
-
-// Pinhole projection (camera frame -> Vulkan clip, depth [0, 1]) for a w x h grid whose texel
-// centres sit at integer coordinates: u = fx x + s y + cx lands on framebuffer x = u + 0.5.
-Mat4d PinholeClip(double fx, double fy, double s, double cx, double cy, int w, int h, double near,
-                  double far) {
-  Mat4d p = Mat4d::Zero();
-  p(0, 0) = 2 * fx / w;
-  p(0, 1) = 2 * s / w;
-  p(0, 2) = 2 * (cx + 0.5) / w - 1;
-  p(1, 1) = 2 * fy / h;
-  p(1, 2) = 2 * (cy + 0.5) / h - 1;
-  p(2, 2) = far / (far - near);
-  p(2, 3) = -far * near / (far - near);
-  p(3, 2) = 1;
-  return p;
-}
-
-// Orthographic projection of pixel size `pixel_m` for w x h pixels centred on the axis (the
-// camera's cx = (w - 1) / 2), depth range [near, far].
-Mat4d OrthoClip(double pixel_m, int w, int h, double near, double far) {
-  Mat4d p = Mat4d::Zero();
-  p(0, 0) = 2 / (pixel_m * w);
-  p(1, 1) = 2 / (pixel_m * h);
-  p(2, 2) = 1 / (far - near);
-  p(2, 3) = -near / (far - near);
-  p(3, 3) = 1;
-  return p;
-}
-
-void Basis(const Vec3d& forward, Vec3d* right, Vec3d* up) {
-  const Vec3d helper = std::abs(forward.z()) < 0.9 ? Vec3d::UnitZ() : Vec3d::UnitX();
-  *right = forward.cross(helper).normalized();
-  *up = forward.cross(*right).normalized();
-}
-
-Mat4d ViewMatrix(const Vec3d& origin, const Vec3d& forward, const Vec3d& right, const Vec3d& up) {
-  Mat4d view = Mat4d::Identity();
-  view.block<1, 3>(0, 0) = right.transpose();
-  view.block<1, 3>(1, 0) = up.transpose();
-  view.block<1, 3>(2, 0) = forward.transpose();
-  view.block<3, 1>(0, 3) = -(view.topLeftCorner<3, 3>() * origin);
-  return view;
 }
 
 sh::MaskView PerspectiveView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
@@ -210,16 +158,6 @@ StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(gpu::VkContext& ctx, uint32
                            with_color ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL
                                       : VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
   return t;
-}
-
-Status EnsureHostBuffer(gpu::VkContext& ctx, std::unique_ptr<Buffer>* buffer, uint64_t bytes) {
-  if (*buffer != nullptr && (*buffer)->size() >= bytes) return OkStatus();
-  buffer->reset();
-  // At least 16 bytes: Buffer::Create needs a size > 0 (an empty binding still needs a buffer).
-  REFLCAP_ASSIGN_OR_RETURN(Buffer b, Buffer::Create(ctx, std::max<uint64_t>(bytes, 16),
-                                                    MemoryKind::kHost));
-  *buffer = std::make_unique<Buffer>(std::move(b));
-  return OkStatus();
 }
 
 // The camera-map grid of one camera and, for a pinhole camera, the undistorted normalised
@@ -607,12 +545,12 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   sh::MaskParams p{};
   const Mat4d object_to_cam = Homogeneous(cam_from_object);
   if (pinhole) {
-    SetRows(PinholeClip(grid->fx, grid->fy, grid->skew, grid->cx, grid->cy, grid->width,
-                        grid->height, near, far) *
+    SetRows(gpu::PinholeClipFromCam(grid->fx, grid->fy, grid->skew, grid->cx, grid->cy,
+                                    grid->width, grid->height, near, far) *
                 object_to_cam,
             p.camera_clip_from_object);
   } else {
-    SetRows(OrthoClip(camera.pixel_size_m, w, h, near, far) * object_to_cam,
+    SetRows(gpu::OrthoClipFromCam(camera.pixel_size_m, w, h, near, far) * object_to_cam,
             p.camera_clip_from_object);
   }
   SetRigidRows(cam_from_object, p.cam_from_object);

@@ -164,4 +164,13 @@ Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, ui
   return OkStatus();
 }
 
+Status EnsureHostBuffer(VkContext& ctx, std::unique_ptr<Buffer>* buffer, uint64_t bytes) {
+  if (*buffer != nullptr && (*buffer)->size() >= bytes) return OkStatus();
+  buffer->reset();
+  REFLCAP_ASSIGN_OR_RETURN(Buffer b, Buffer::Create(ctx, std::max<uint64_t>(bytes, 16),
+                                                    MemoryKind::kHost));
+  *buffer = std::make_unique<Buffer>(std::move(b));
+  return OkStatus();
+}
+
 }  // namespace reflcap::gpu

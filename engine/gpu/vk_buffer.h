@@ -16,6 +16,7 @@
 #include <vulkan/vulkan.h>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "engine/core/status.h"
@@ -76,6 +77,10 @@ Status UploadStaged(VkContext& ctx, const void* src, uint64_t size, Buffer& dst,
                     uint64_t dst_offset, uint64_t staging_bytes);
 Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size,
                       void* dst, uint64_t staging_bytes);
+
+// Makes *buffer a host-visible buffer of at least `bytes` (16 when bytes is 0: a binding needs a
+// buffer even when it is empty), reusing the current one when it is large enough.
+Status EnsureHostBuffer(VkContext& ctx, std::unique_ptr<Buffer>* buffer, uint64_t bytes);
 
 // A device buffer holding `values` (at least one element).
 template <typename T>

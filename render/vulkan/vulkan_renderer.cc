@@ -17,6 +17,7 @@
 #include "engine/gpu/vk_descriptors.h"
 #include "engine/gpu/vk_graphics_pipeline.h"
 #include "engine/gpu/vk_image.h"
+#include "engine/gpu/vk_view.h"
 #include "engine/mesh/ray_scene.h"
 #include "shaders/shared/render_params.h"
 
@@ -64,57 +65,12 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-sh::vec4 V4(const Vec3d& v, double w) {
-  return {float(v.x()), float(v.y()), float(v.z()), float(w)};
-}
-
-void SetRows(const Mat4d& m, sh::vec4 rows[4]) {
-  for (int r = 0; r < 4; ++r)
-    rows[r] = {float(m(r, 0)), float(m(r, 1)), float(m(r, 2)), float(m(r, 3))};
-}
-
-// 4x4 of a rigid transform b_from_a.
-Mat4d Homogeneous(const Rigid3& t) {
-  Mat4d m = Mat4d::Identity();
-  m.topLeftCorner<3, 3>() = t.rotation;
-  m.topRightCorner<3, 1>() = t.translation;
-  return m;
-}
-
-// Pinhole projection (camera frame -> clip, Vulkan NDC and depth [0, 1]) for a W x H image whose
-// pixel centres sit at integer coordinates: u = fx x + s y + cx lands on framebuffer x = u + 0.5.
-Mat4d PinholeClipFromCam(double fx, double fy, double s, double cx, double cy, int w, int h,
-                         double near, double far) {
-  Mat4d p = Mat4d::Zero();
-  p(0, 0) = 2 * fx / w;
-  p(0, 1) = 2 * s / w;
-  p(0, 2) = 2 * (cx + 0.5) / w - 1;
-  p(1, 1) = 2 * fy / h;
-  p(1, 2) = 2 * (cy + 0.5) / h - 1;
-  p(2, 2) = far / (far - near);
-  p(2, 3) = -far * near / (far - near);
-  p(3, 2) = 1;
-  return p;
-}
-
-// Orthographic projection for pixel size `pixel_m` (m) and an image of w x h pixels centred on
-// the axis (the camera's cx = (w - 1)/2), depth range [near, far] along +z.
-Mat4d OrthoClipFromCam(double pixel_m, int w, int h, double near, double far) {
-  Mat4d p = Mat4d::Zero();
-  p(0, 0) = 2 / (pixel_m * w);
-  p(1, 1) = 2 / (pixel_m * h);
-  p(2, 2) = 1 / (far - near);
-  p(2, 3) = -near / (far - near);
-  p(3, 3) = 1;
-  return p;
-}
-
-// Two unit vectors completing `forward` to an orthonormal frame.
-void Basis(const Vec3d& forward, Vec3d* right, Vec3d* up) {
-  const Vec3d helper = std::abs(forward.z()) < 0.9 ? Vec3d::UnitZ() : Vec3d::UnitX();
-  *right = forward.cross(helper).normalized();
-  *up = forward.cross(*right).normalized();
-}
+using gpu::Basis;
+using gpu::Homogeneous;
+using gpu::OrthoClipFromCam;
+using gpu::PinholeClipFromCam;
+using gpu::SetRows;
+using gpu::V4;
 
 // A shadow view (render_params.h ShadowView) looking along `forward` from `origin`.
 sh::ShadowView PerspectiveView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
@@ -275,15 +231,6 @@ std::vector<std::array<int32_t, 3>> TriangleNeighbours(const TriangleMesh& mesh)
     i = j;
   }
   return result;
-}
-
-// A host-visible buffer of at least `bytes`, grown on demand.
-Status EnsureHostBuffer(gpu::VkContext& ctx, std::unique_ptr<Buffer>* buffer, uint64_t bytes) {
-  if (*buffer != nullptr && (*buffer)->size() >= bytes) return OkStatus();
-  buffer->reset();
-  REFLCAP_ASSIGN_OR_RETURN(Buffer b, Buffer::Create(ctx, bytes, MemoryKind::kHost));
-  *buffer = std::make_unique<Buffer>(std::move(b));
-  return OkStatus();
 }
 
 }  // namespace
