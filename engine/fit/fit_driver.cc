@@ -4,6 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <future>
+#include <utility>
+
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include <nlohmann/json.hpp>
 
@@ -21,6 +26,9 @@ namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
 namespace {
+
+// SigmaSpill's scratch file in the staging folder (deleted before the folder is committed).
+constexpr const char* kSigmaScratchFile = "sigma.scratch";
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -40,34 +48,83 @@ double Bic(const TexelFit& f, LobeModel model, int lobes) {
   return 2.0 * double(f.cost) + k * std::log(double(std::max(f.residuals, 1)));
 }
 
+// Image channel of each FitStore parameter slot (fit_store.h layout: rho_d, then per lobe and
+// channel Cx, Cy, Cz, n) in the BrdfChannelNames order (rho_d, then per lobe and field R, G, B).
+std::vector<int> MapChannelOfSlot(int lobes) {
+  std::vector<int> channel(size_t(brdf::kChannels * brdf::ParamsPerChannel(lobes)));
+  for (int c = 0; c < brdf::kChannels; ++c) channel[c] = c;
+  for (int k = 0; k < lobes; ++k) {
+    for (int c = 0; c < brdf::kChannels; ++c) {
+      for (int f = 0; f < 4; ++f) {
+        channel[brdf::kChannels + 4 * (brdf::kChannels * k + c) + f] =
+            brdf::kChannels + 4 * brdf::kChannels * k + brdf::kChannels * f + c;
+      }
+    }
+  }
+  return channel;
+}
+
+// Fills pixel `px` of a parameter map from one texel's floats in the FitStore layout.
+void PutTexel(const std::vector<int>& channel, const float* in, float* px) {
+  for (size_t i = 0; i < channel.size(); ++i) px[channel[i]] = in[i];
+}
+
+// Gives the heap's free pages back to the system (glibc keeps them in its arenas, the chunk
+// reader thread's among them), so that little of one phase's memory (the chunks) stays resident
+// under the next (the maps). Not all of it: at 1 M texels ~65 MB of freed chunk-sized blocks
+// stay resident.
+void ReleaseFreeHeap() {
+#ifdef __GLIBC__
+  malloc_trim(0);
+#endif
+}
+
 }  // namespace
 
-Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, int lobes,
-                    const std::vector<TexelFit>& fits, const std::vector<int64_t>& lobe_donor) {
-  REFLCAP_CHECK(fits.size() == atlas.TexelCount());
-  REFLCAP_CHECK(lobe_donor.empty() || lobe_donor.size() == fits.size());
-  BrdfMaps params, sigma;
-  params.num_lobes = sigma.num_lobes = lobes;
-  params.texels.reserve(fits.size());
-  sigma.texels.reserve(fits.size());
-  Image status(atlas.width, atlas.height, 4, 0.0f);
-  for (size_t p = 0; p < status.PixelCount(); ++p) {
-    status.data[4 * p] = float(gpu::shared::kFitStatusNoTexel);
-    status.data[4 * p + 3] = -1;
+Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
+                    SigmaSpill* sigma) {
+  REFLCAP_CHECK(fits->size() == atlas.TexelCount());
+  REFLCAP_CHECK(sigma->lobes() == fits->lobes());
+  {
+    Image status(atlas.width, atlas.height, 4, 0.0f);
+    for (size_t p = 0; p < status.PixelCount(); ++p) {
+      status.data[4 * p] = float(gpu::shared::kFitStatusNoTexel);
+      status.data[4 * p + 3] = -1;
+    }
+    for (size_t t = 0; t < fits->size(); ++t) {
+      float* px = &status.data[4 * size_t(atlas.pixel_of_texel[t])];
+      px[0] = float(int(fits->status(t)));
+      px[1] = float(fits->iterations(t));
+      px[2] = fits->cost(t);
+      // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
+      px[3] = float(fits->donor(t));
+    }
+    REFLCAP_RETURN_IF_ERROR(
+        WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor"}));
   }
-  for (size_t t = 0; t < fits.size(); ++t) {
-    params.texels.push_back(fits[t].params);
-    sigma.texels.push_back(fits[t].sigma);
-    float* px = &status.data[4 * size_t(atlas.pixel_of_texel[t])];
-    px[0] = float(int(fits[t].status));
-    px[1] = float(fits[t].iterations);
-    px[2] = fits[t].cost;
-    // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
-    px[3] = lobe_donor.empty() ? -1.0f : float(lobe_donor[t]);
+  const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
+  const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
+  REFLCAP_CHECK(names.size() == channel.size());
+  const int n = int(channel.size());
+  {
+    Image params(atlas.width, atlas.height, n, 0.0f);
+    for (size_t t = 0; t < fits->size(); ++t) {
+      PutTexel(channel, fits->params(t), &params.data[size_t(atlas.pixel_of_texel[t]) * n]);
+    }
+    // Freed before the writer makes its own copy of the image.
+    fits->ReleaseParams();
+    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "params.exr", params, names, ExrPixelType::kFloat));
   }
-  REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "params.exr", params, atlas));
-  REFLCAP_RETURN_IF_ERROR(WriteBrdfMaps(dir / "sigma.exr", sigma, atlas));
-  return WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor"});
+  Image sigmas(atlas.width, atlas.height, n, 0.0f);
+  REFLCAP_RETURN_IF_ERROR(sigma->ReadAll([&](size_t t, const float* in) {
+    float* px = &sigmas.data[size_t(atlas.pixel_of_texel[t]) * n];
+    PutTexel(channel, in, px);
+    // Lobe transfer re-fitted the albedo of a texel with a donor: re-fitted, not measured.
+    if (fits->donor(t) >= 0) {
+      for (int c = 0; c < brdf::kChannels; ++c) px[c] = -1;
+    }
+  }));
+  return WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat);
 }
 
 StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
@@ -96,12 +153,16 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     }
   }
 
-  std::vector<TexelFit> fits(info.texels);
-  // Texels no chunk holds keep this: zero parameters, too few samples.
-  for (TexelFit& f : fits) {
-    BeginTexel(options.lobes, &f);
-    f.status = FitStatus::kTooFewSamples;
+  if (info.texels > FitStore::kMaxTexels) {
+    return InvalidArgumentError(samples.string(), ": ", info.texels, " texels; fit takes at most ",
+                                FitStore::kMaxTexels);
   }
+  // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
+  // unknown sigmas.
+  FitStore fits(info.texels, options.lobes);
+  REFLCAP_ASSIGN_OR_RETURN(
+      std::unique_ptr<SigmaSpill> sigma,
+      SigmaSpill::Create(staging.path() / kSigmaScratchFile, info.texels, options.lobes));
   FitRunSummary summary;
   summary.device = fitter->device();
   Progress progress("fit", info.texels);
@@ -140,67 +201,72 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       }
     }
     fit_seconds += Seconds(fit_start);
-    std::copy(results.begin(), results.end(), fits.begin() + chunk->first_texel);
+    for (size_t i = 0; i < results.size(); ++i) fits.Set(chunk->first_texel + i, results[i]);
+    REFLCAP_RETURN_IF_ERROR(sigma->Write(chunk->first_texel, results));
     progress.Advance(chunk->texel_count);
   }
   progress.Finish();
+  // The fitter's per-worker workspaces and the chunk results are sized by the largest chunk;
+  // nothing needs them past the fit.
+  fitter.reset();
+  std::vector<TexelFit>().swap(results);
+  std::vector<TexelFit>().swap(iso_results);
+  ReleaseFreeHeap();
 
   // Lobe transfer (lobe_transfer.h): candidates from the maps, then a second pass over the
   // chunks that hold recipients to test them on their own samples.
   const auto transfer_start = std::chrono::steady_clock::now();
   LobeTransferStats transfer;
-  std::vector<int64_t> lobe_donor(info.texels, -1);
   if (options.lobe_transfer.enabled && options.lobes > 0) {
-    std::vector<uint8_t> lenders;  // round >= 1: the texels that borrowed in the last round
+    // round >= 1: the texels that borrowed in the last round (one byte per texel).
+    std::vector<uint8_t> lenders;
     for (int round = 0; round < options.lobe_transfer.rounds; ++round) {
       LobeTransferStats round_stats;
-      const auto candidates = FindLobeDonors(atlas, fits, lobe_donor, options.lobe_transfer,
-                                             &round_stats, round == 0 ? nullptr : &lenders);
+      const LobeCandidates candidates = FindLobeDonors(
+          atlas, fits, options.lobe_transfer, &round_stats, round == 0 ? nullptr : &lenders);
       if (round == 0) {
         transfer.recipients = round_stats.recipients;
         transfer.no_donor = round_stats.no_donor;
       }
       if (round_stats.no_donor == round_stats.recipients) break;  // no candidate anywhere
-      const std::vector<int64_t> before = lobe_donor;
+      lenders.assign(info.texels, 0);
       for (uint32_t c = 0; c < info.chunks; ++c) {
         // Chunks hold consecutive texels: skip those without a recipient that has candidates.
         const uint64_t first = uint64_t(c) * info.chunk_texels;
         const uint64_t end = std::min<uint64_t>(first + info.chunk_texels, info.texels);
-        bool any = false;
-        for (uint64_t t = first; t < end && !any; ++t) any = !candidates[t].empty();
-        if (!any) continue;
+        if (!candidates.AnyIn(first, end)) continue;
         REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk chunk, store->ReadChunk(c));
         ApplyLobeTransfer(chunk, candidates, options.lobe_transfer, options.min_cos_theta,
-                          options.threads, &fits, &lobe_donor, &round_stats);
+                          options.threads, &fits, &round_stats, &lenders);
       }
       if (round == 0) transfer.rejected = round_stats.rejected;
       transfer.transferred += round_stats.transferred;
       ++transfer.rounds;
       if (round_stats.transferred == 0) break;
-      lenders.assign(info.texels, 0);
-      for (size_t t = 0; t < lobe_donor.size(); ++t) lenders[t] = lobe_donor[t] != before[t];
     }
   }
   const double transfer_seconds = Seconds(transfer_start);
 
   const auto write_start = std::chrono::steady_clock::now();
-  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, options.lobes, fits, lobe_donor));
+  ReleaseFreeHeap();
+  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, &fits, sigma.get()));
+  REFLCAP_RETURN_IF_ERROR(sigma->Remove());
 
   std::vector<double> costs, chi2;
   double iterations = 0;
   int max_iterations = 0;
   size_t lambert_only = 0;
   const int params_per_problem = NumParams(options.lobe_model, options.lobes);
-  for (const TexelFit& f : fits) {
-    ++summary.status_counts[int(f.status)];
-    if (f.residuals == 0) continue;
+  for (size_t t = 0; t < fits.size(); ++t) {
+    ++summary.status_counts[int(fits.status(t))];
+    if (fits.residuals(t) == 0) continue;
     ++summary.texels_with_samples;
-    costs.push_back(f.cost);
-    const int dof = f.residuals - params_per_problem * ProblemsPerTexel(options.lobe_model);
-    if (dof > 0) chi2.push_back(2.0 * f.cost / dof);
-    iterations += f.iterations;
-    max_iterations = std::max(max_iterations, f.iterations);
-    lambert_only += f.lambert_only;
+    costs.push_back(fits.cost(t));
+    const int dof = fits.residuals(t) - params_per_problem * ProblemsPerTexel(options.lobe_model);
+    if (dof > 0) chi2.push_back(2.0 * fits.cost(t) / dof);
+    iterations += fits.iterations(t);
+    max_iterations = std::max(max_iterations, fits.iterations(t));
+    lambert_only += fits.lambert_only(t);
   }
   summary.texels = info.texels;
   summary.fit_seconds = fit_seconds;
@@ -247,8 +313,8 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"rejected", transfer.rejected},
         {"transferred", transfer.transferred},
         {"rounds", transfer.rounds}}},
-      {"cost_percentiles", Percentiles(costs)},
-      {"reduced_chi2_percentiles", Percentiles(chi2)},
+      {"cost_percentiles", Percentiles(std::move(costs))},
+      {"reduced_chi2_percentiles", Percentiles(std::move(chi2))},
       {"iterations", {{"mean", summary.texels_with_samples ? iterations / summary.texels_with_samples : 0.0},
                       {"max", max_iterations}}},
       {"fits_per_second", summary.fits_per_second},

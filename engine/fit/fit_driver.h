@@ -1,7 +1,10 @@
 #pragma once
 // `reflcap fit` as a library call: stream a sample store's chunks through a Fitter (reading the
 // next chunk on a thread while the current one is fitted — double buffering, so disk reads
-// overlap the CPU or GPU work and at most two chunks are in memory) and write the FIT folder:
+// overlap the CPU or GPU work and at most two chunks are in memory) and write the FIT folder.
+// The fits of all texels are held in a FitStore (fit_store.h, 82 bytes per texel for one lobe),
+// their sigmas in a scratch file in the staging folder (SigmaSpill); the maps are built and
+// written one at a time:
 //   FIT/params.exr       BrdfMaps (engine/texel/brdf_maps.h channel names), atlas layout
 //   FIT/sigma.exr        the same channels, each parameter's standard deviation (-1 = unknown)
 //   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
@@ -15,6 +18,7 @@
 #include <vector>
 
 #include "engine/core/status.h"
+#include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
 #include "engine/mesh/texel_atlas.h"
 
@@ -43,11 +47,12 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
                                const std::string& device = "",
                                const std::string& backend_choice = "");
 
-// Writes params.exr, sigma.exr and status.exr for per-texel fits in `atlas` layout into `dir`.
-// lobe_donor[t]: the texel whose lobes texel t borrowed (lobe_transfer.h), -1 for none; empty =
-// none anywhere.
-Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, int lobes,
-                    const std::vector<TexelFit>& fits,
-                    const std::vector<int64_t>& lobe_donor = {});
+// Writes status.exr, params.exr and sigma.exr for the per-texel fits in `atlas` layout into
+// `dir`, one map at a time, each built straight from the store and the spill (no per-texel
+// BrdfParams copy). A texel with a lobe donor gets albedo sigmas -1 (re-fitted, not measured).
+// Releases the store's parameters once their map is built (FitStore::ReleaseParams): afterwards
+// only its scalars remain.
+Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, FitStore* fits,
+                    SigmaSpill* sigma);
 
 }  // namespace reflcap::fit

@@ -36,25 +36,27 @@ namespace {
 // noise, so the denominator never falls under it (1e-3 = 0.1 % reflectance).
 constexpr double kBlackAlbedo = 1e-3;
 
-double AlbedoDistance(const brdf::BrdfParams& a, const brdf::BrdfParams& b) {
+// rho_a, rho_b: the three diffuse albedos (FitStore layout: the first floats of a texel).
+double AlbedoDistance(const float* a, const float* b) {
   double diff = 0, na = 0, nb = 0;
   for (int c = 0; c < brdf::kChannels; ++c) {
-    diff += (double(a.rho_d[c]) - b.rho_d[c]) * (double(a.rho_d[c]) - b.rho_d[c]);
-    na += double(a.rho_d[c]) * a.rho_d[c];
-    nb += double(b.rho_d[c]) * b.rho_d[c];
+    diff += (double(a[c]) - b[c]) * (double(a[c]) - b[c]);
+    na += double(a[c]) * a[c];
+    nb += double(b[c]) * b[c];
   }
   return std::sqrt(diff) / std::max({std::sqrt(na), std::sqrt(nb), kBlackAlbedo});
 }
 
 // A texel that fitted its own lobe, or borrowed one in an earlier round.
-bool IsDonor(const TexelFit& f, int64_t borrowed_from) {
-  return !f.lambert_only && f.params.num_lobes > 0 &&
-         (f.status == FitStatus::kConverged || borrowed_from >= 0);
+bool IsDonor(const FitStore& fits, size_t t) {
+  return !fits.lambert_only(t) && fits.lobes() > 0 &&
+         (fits.status(t) == FitStatus::kConverged || fits.donor(t) >= 0);
 }
 
-bool IsRecipient(const TexelFit& f, int64_t borrowed_from) {
-  return f.status == FitStatus::kUnidentifiableLobe && f.samples >= kMinTransferSamples &&
-         f.params.num_lobes > 0 && f.lambert_only && borrowed_from < 0;
+bool IsRecipient(const FitStore& fits, size_t t) {
+  return fits.status(t) == FitStatus::kUnidentifiableLobe &&
+         fits.samples(t) >= kMinTransferSamples && fits.lobes() > 0 && fits.lambert_only(t) &&
+         fits.donor(t) < 0;
 }
 
 // One sample of a recipient, as the fit used it: unit directions, both above min_cos.
@@ -130,24 +132,44 @@ double LobeSupremum(const brdf::BrdfParams& p, int c) {
 
 }  // namespace
 
-std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
-                                                  const std::vector<TexelFit>& fits,
-                                                  const std::vector<int64_t>& donor_of,
-                                                  const LobeTransferOptions& options,
-                                                  LobeTransferStats* stats,
-                                                  const std::vector<uint8_t>* lenders) {
+std::vector<uint32_t> LobeCandidates::Of(uint32_t t) const {
+  const auto it = std::lower_bound(recipients.begin(), recipients.end(), t);
+  if (it == recipients.end() || *it != t) return {};
+  const size_t i = size_t(it - recipients.begin());
+  return std::vector<uint32_t>(donors.begin() + offsets[i], donors.begin() + offsets[i + 1]);
+}
+
+bool LobeCandidates::AnyIn(uint64_t first, uint64_t end) const {
+  const auto it = std::lower_bound(recipients.begin(), recipients.end(), first,
+                                   [](uint32_t r, uint64_t v) { return uint64_t(r) < v; });
+  return it != recipients.end() && uint64_t(*it) < end;
+}
+
+LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
+                              const LobeTransferOptions& options, LobeTransferStats* stats,
+                              const std::vector<uint8_t>* lenders) {
   REFLCAP_CHECK(fits.size() == atlas.TexelCount());
-  REFLCAP_CHECK(donor_of.size() == fits.size());
   REFLCAP_CHECK(!lenders || lenders->size() == fits.size());
-  std::vector<std::vector<uint32_t>> candidates(fits.size());
+  LobeCandidates candidates;
   if (!options.enabled) return candidates;
-  std::vector<int64_t> texel_at(size_t(atlas.width) * atlas.height, -1);
-  for (size_t t = 0; t < fits.size(); ++t) texel_at[atlas.pixel_of_texel[t]] = int64_t(t);
+  // FitStore::kMaxTexels keeps texel indices within int32.
+  std::vector<int32_t> texel_at(size_t(atlas.width) * atlas.height, -1);
+  for (size_t t = 0; t < fits.size(); ++t) texel_at[atlas.pixel_of_texel[t]] = int32_t(t);
+  // Each block of texels collects its rows on its own; the blocks are joined in texel order, so
+  // the result does not depend on which thread ran which block.
+  constexpr int64_t kBlock = 4096;  // texels per block: enough work per block to amortise a task
+  struct Rows {
+    std::vector<uint32_t> recipients;
+    std::vector<uint8_t> counts;  // candidates per recipient, <= kMaxTransferCandidates
+    std::vector<uint32_t> donors;
+  };
+  std::vector<Rows> blocks(size_t((int64_t(fits.size()) + kBlock - 1) / kBlock));
   std::atomic<size_t> recipients{0}, no_donor{0};
-  ParallelFor(0, int64_t(fits.size()), 4096, [&](int64_t begin, int64_t end, int) {
+  ParallelFor(0, int64_t(fits.size()), kBlock, [&](int64_t begin, int64_t end, int) {
+    Rows& rows = blocks[size_t(begin / kBlock)];
     std::vector<std::pair<double, uint32_t>> found;
     for (int64_t t = begin; t < end; ++t) {
-      if (!IsRecipient(fits[t], donor_of[t])) continue;
+      if (!IsRecipient(fits, size_t(t))) continue;
       ++recipients;
       const int x0 = int(atlas.pixel_of_texel[t] % uint32_t(atlas.width));
       const int y0 = int(atlas.pixel_of_texel[t] / uint32_t(atlas.width));
@@ -156,12 +178,9 @@ std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
            y <= std::min(atlas.height - 1, y0 + options.radius); ++y) {
         for (int x = std::max(0, x0 - options.radius);
              x <= std::min(atlas.width - 1, x0 + options.radius); ++x) {
-          const int64_t d = texel_at[size_t(y) * atlas.width + x];
-          if (d < 0 || (lenders && !(*lenders)[d]) || !IsDonor(fits[d], donor_of[d]) ||
-              fits[d].params.num_lobes != fits[t].params.num_lobes) {
-            continue;
-          }
-          const double distance = AlbedoDistance(fits[t].params, fits[d].params);
+          const int32_t d = texel_at[size_t(y) * atlas.width + x];
+          if (d < 0 || (lenders && !(*lenders)[d]) || !IsDonor(fits, size_t(d))) continue;
+          const double distance = AlbedoDistance(fits.params(size_t(t)), fits.params(size_t(d)));
           if (distance <= options.albedo_tolerance) found.emplace_back(distance, uint32_t(d));
         }
       }
@@ -171,28 +190,51 @@ std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
       }
       const size_t keep = std::min(found.size(), size_t(kMaxTransferCandidates));
       std::partial_sort(found.begin(), found.begin() + keep, found.end());
-      for (size_t i = 0; i < keep; ++i) candidates[t].push_back(found[i].second);
+      rows.recipients.push_back(uint32_t(t));
+      rows.counts.push_back(uint8_t(keep));
+      for (size_t i = 0; i < keep; ++i) rows.donors.push_back(found[i].second);
     }
   });
+  size_t total_recipients = 0, total_donors = 0;
+  for (const Rows& rows : blocks) {
+    total_recipients += rows.recipients.size();
+    total_donors += rows.donors.size();
+  }
+  candidates.recipients.reserve(total_recipients);
+  candidates.offsets.reserve(total_recipients + 1);
+  candidates.donors.reserve(total_donors);
+  for (Rows& rows : blocks) {
+    candidates.recipients.insert(candidates.recipients.end(), rows.recipients.begin(),
+                                 rows.recipients.end());
+    for (uint8_t count : rows.counts) candidates.offsets.push_back(candidates.offsets.back() + count);
+    candidates.donors.insert(candidates.donors.end(), rows.donors.begin(), rows.donors.end());
+    rows = Rows{};
+  }
   stats->recipients += recipients;
   stats->no_donor += no_donor;
   return candidates;
 }
 
-void ApplyLobeTransfer(const TexelSampleChunk& chunk,
-                       const std::vector<std::vector<uint32_t>>& candidates,
+void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& candidates,
                        const LobeTransferOptions& options, double min_cos_theta, int threads,
-                       std::vector<TexelFit>* fits, std::vector<int64_t>* donor_of,
-                       LobeTransferStats* stats) {
+                       FitStore* fits, LobeTransferStats* stats, std::vector<uint8_t>* borrowed) {
   if (!options.enabled) return;
+  REFLCAP_CHECK(!borrowed || borrowed->size() == fits->size());
+  // The rows of this chunk's recipients: [row_begin, row_end).
+  const auto& rec = candidates.recipients;
+  const uint64_t first = chunk.first_texel, end = first + chunk.texel_count;
+  const auto less = [](uint32_t r, uint64_t v) { return uint64_t(r) < v; };
+  const int64_t row_begin = std::lower_bound(rec.begin(), rec.end(), first, less) - rec.begin();
+  const int64_t row_end = std::lower_bound(rec.begin(), rec.end(), end, less) - rec.begin();
   std::atomic<size_t> rejected{0}, transferred{0};
-  ParallelFor(0, int64_t(chunk.texel_count), 256, [&](int64_t begin, int64_t end, int) {
+  // 16 recipients per task: each tests up to kMaxTransferCandidates lobes on all its samples.
+  ParallelFor(row_begin, row_end, 16, [&](int64_t begin, int64_t stop, int) {
     std::vector<UsableSample> usable;
-    for (int64_t i = begin; i < end; ++i) {
-      const size_t t = size_t(chunk.first_texel) + size_t(i);
-      if (candidates[t].empty()) continue;
-      const size_t count = chunk.SampleCount(uint32_t(i));
-      const BrdfSample* samples = chunk.SamplesOf(uint32_t(i));
+    for (int64_t row = begin; row < stop; ++row) {
+      const size_t t = rec[size_t(row)];
+      const uint32_t i = uint32_t(t - first);
+      const size_t count = chunk.SampleCount(i);
+      const BrdfSample* samples = chunk.SamplesOf(i);
       usable.resize(count);
       for (size_t k = 0; k < count; ++k) usable[k] = Prepare(samples[k], min_cos_theta);
       std::array<float, brdf::kChannels> rho{};
@@ -212,32 +254,37 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk,
       double best_cost = lambert_cost + options.max_cost_increase;
       int64_t best = -1;
       std::array<float, brdf::kChannels> best_rho{};
-      for (uint32_t donor : candidates[t]) {
+      brdf::BrdfParams best_params;
+      for (uint64_t j = candidates.offsets[size_t(row)]; j < candidates.offsets[size_t(row) + 1];
+           ++j) {
+        const uint32_t donor = candidates.donors[size_t(j)];
+        const brdf::BrdfParams lobes = fits->Get(donor).params;
         bool within_evidence = true;
         for (int c = 0; c < brdf::kChannels; ++c) {
-          within_evidence = within_evidence && LobeSupremum((*fits)[donor].params, c) <=
-                                                   kMaxLobeSupremum * brightest[c];
+          within_evidence =
+              within_evidence && LobeSupremum(lobes, c) <= kMaxLobeSupremum * brightest[c];
         }
         if (!within_evidence) continue;
-        const double cost =
-            RefitAlbedoCost(samples, count, usable.data(), &(*fits)[donor].params, &rho);
+        const double cost = RefitAlbedoCost(samples, count, usable.data(), &lobes, &rho);
         if (std::isfinite(cost) && cost <= best_cost) {
           best_cost = cost;
           best = donor;
           best_rho = rho;
+          best_params = lobes;
         }
       }
       if (best < 0) {
         ++rejected;
         continue;
       }
-      TexelFit& f = (*fits)[t];
-      f.params.lobes = (*fits)[size_t(best)].params.lobes;
+      TexelFit f = fits->Get(t);
+      f.params.lobes = best_params.lobes;
       f.params.rho_d = best_rho;
       f.cost = float(best_cost);
       f.lambert_only = false;
-      for (int c = 0; c < brdf::kChannels; ++c) f.sigma.rho_d[c] = -1;  // re-fitted, not measured
-      (*donor_of)[t] = best;
+      fits->Set(t, f);
+      fits->set_donor(t, best);
+      if (borrowed) (*borrowed)[t] = 1;
       ++transferred;
     }
   }, threads);

@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "engine/core/status.h"
+#include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
 #include "engine/mesh/texel_atlas.h"
 #include "engine/texel/samples.h"
@@ -61,26 +62,39 @@ struct LobeTransferStats {
   int rounds = 0;          // rounds run
 };
 
-// Phase 1: for every recipient in `fits` (indexed by texel), its candidate donors (texel
-// indices, closest albedo first). Empty for non-recipients. donor_of[t] >= 0 marks a texel that
-// borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.
-// `lenders`, when given, restricts the donors to the texels it marks — the driver passes the
-// texels that borrowed in the previous round, since every other donor was already tested
-// against every recipient in its reach (a recipient they did not convince would refuse again).
-std::vector<std::vector<uint32_t>> FindLobeDonors(const TexelAtlas& atlas,
-                                                  const std::vector<TexelFit>& fits,
-                                                  const std::vector<int64_t>& donor_of,
-                                                  const LobeTransferOptions& options,
-                                                  LobeTransferStats* stats,
-                                                  const std::vector<uint8_t>* lenders = nullptr);
+// Candidate donors of the recipients in compressed rows: recipient `recipients[i]` (ascending
+// texel indices; only recipients with at least one candidate appear) tests the donors
+// `donors[offsets[i] .. offsets[i + 1])`, closest albedo first. A few bytes per recipient
+// instead of a vector per texel.
+struct LobeCandidates {
+  std::vector<uint32_t> recipients;
+  std::vector<uint64_t> offsets{0};  // recipients.size() + 1
+  std::vector<uint32_t> donors;
+
+  // The candidates of texel t, closest albedo first (empty when it has none).
+  std::vector<uint32_t> Of(uint32_t t) const;
+  // True when some texel in [first, end) has candidates.
+  bool AnyIn(uint64_t first, uint64_t end) const;
+};
+
+// Phase 1: for every recipient in `fits`, its candidate donors. fits.donor(t) >= 0 marks a texel
+// that borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.
+// `lenders`, when given (one byte per texel), restricts the donors to the texels it marks — the
+// driver passes the texels that borrowed in the previous round, since every other donor was
+// already tested against every recipient in its reach (a recipient they did not convince would
+// refuse again).
+LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
+                              const LobeTransferOptions& options, LobeTransferStats* stats,
+                              const std::vector<uint8_t>* lenders = nullptr);
 
 // Phase 2 for the texels of one chunk: tests each recipient's candidates on its samples and, for
-// the accepted one, overwrites fits[t] (albedo re-fitted, the donor's lobes, lambert_only
-// false) and sets donor_of[t] to the donor. `min_cos_theta` masks grazing samples as the fit did.
-void ApplyLobeTransfer(const TexelSampleChunk& chunk,
-                       const std::vector<std::vector<uint32_t>>& candidates,
+// the accepted one, overwrites its fit (albedo re-fitted, the donor's lobes, lambert_only false)
+// and sets its donor (the maps then write its albedo sigmas as unknown: WriteFitMaps).
+// `min_cos_theta` masks grazing samples as the fit did. `borrowed`, when given (one byte per
+// texel), gets 1 for every texel that took a lobe.
+void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& candidates,
                        const LobeTransferOptions& options, double min_cos_theta, int threads,
-                       std::vector<TexelFit>* fits, std::vector<int64_t>* donor_of,
-                       LobeTransferStats* stats);
+                       FitStore* fits, LobeTransferStats* stats,
+                       std::vector<uint8_t>* borrowed = nullptr);
 
 }  // namespace reflcap::fit

@@ -6,8 +6,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <vector>
 
 #include "engine/brdf/lafortune.h"
+#include "engine/fit/fit_store.h"
 #include "engine/math/types.h"
 
 namespace reflcap::fit {
@@ -45,7 +49,12 @@ TexelFit RecipientFit(const std::array<float, 3>& rho) {
   return f;
 }
 
-std::vector<int64_t> NoneBorrowed(size_t texels) { return std::vector<int64_t>(texels, -1); }
+// The fits as the driver holds them (one lobe per texel), none borrowed yet.
+FitStore Store(const std::vector<TexelFit>& fits) {
+  FitStore store(fits.size(), 1);
+  for (size_t t = 0; t < fits.size(); ++t) store.Set(t, fits[t]);
+  return store;
+}
 
 TexelAtlas LineAtlas(int texels) {
   TexelAtlas atlas;
@@ -105,26 +114,31 @@ TEST(LobeTransfer, ASimilarNeighboursLobeIsLentWhenTheSamplesAgree) {
   const TexelAtlas atlas = LineAtlas(4);
   LobeTransferOptions options;
   LobeTransferStats stats;
-  const auto candidates = FindLobeDonors(atlas, fits, NoneBorrowed(fits.size()), options, &stats);
+  FitStore store = Store(fits);
+  const LobeCandidates candidates = FindLobeDonors(atlas, store, options, &stats);
   EXPECT_EQ(stats.recipients, 2u);
   EXPECT_EQ(stats.no_donor, 1u);  // texel 2: no donor within the albedo tolerance
-  ASSERT_EQ(candidates[1].size(), 1u);
-  EXPECT_EQ(candidates[1][0], 0u);  // not texel 3: Lambert-only texels do not lend
-  EXPECT_TRUE(candidates[2].empty());
+  ASSERT_EQ(candidates.Of(1).size(), 1u);
+  EXPECT_EQ(candidates.Of(1)[0], 0u);  // not texel 3: Lambert-only texels do not lend
+  EXPECT_TRUE(candidates.Of(2).empty());
+  EXPECT_TRUE(candidates.AnyIn(0, 2));
+  EXPECT_FALSE(candidates.AnyIn(2, 4));
 
   const TexelSampleChunk chunk = Chunk({Samples(truth, true), Samples(truth, false),
                                         Samples(truth, false), Samples(truth, true)});
-  std::vector<int64_t> donor(4, -1);
-  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &stats);
+  std::vector<uint8_t> borrowed(4, 0);
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &stats, &borrowed);
   EXPECT_EQ(stats.transferred, 1u);
-  EXPECT_EQ(donor[1], 0);
-  EXPECT_EQ(donor[2], -1);
-  EXPECT_FALSE(fits[1].lambert_only);
-  EXPECT_EQ(fits[1].status, FitStatus::kUnidentifiableLobe);  // borrowed, not measured
-  EXPECT_EQ(fits[1].params.lobes[0][0].n, truth.lobes[0][0].n);
+  EXPECT_EQ(store.donor(1), 0);
+  EXPECT_EQ(store.donor(2), -1);
+  EXPECT_EQ(borrowed, (std::vector<uint8_t>{0, 1, 0, 0}));
+  const TexelFit lent = store.Get(1);
+  EXPECT_FALSE(lent.lambert_only);
+  EXPECT_EQ(lent.status, FitStatus::kUnidentifiableLobe);  // borrowed, not measured
+  EXPECT_EQ(lent.params.lobes[0][0].n, truth.lobes[0][0].n);
   // The albedo is re-fitted with the lobe in place: the samples are exact, so it is the truth's
   // to float rounding of the least-squares sums (1e-4 relative).
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(fits[1].params.rho_d[c], truth.rho_d[c], 1e-4 * truth.rho_d[c]);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(lent.params.rho_d[c], truth.rho_d[c], 1e-4 * truth.rho_d[c]);
 }
 
 TEST(LobeTransfer, SamplesThatContradictTheLobeRefuseIt) {
@@ -135,16 +149,16 @@ TEST(LobeTransfer, SamplesThatContradictTheLobeRefuseIt) {
   std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit({0.4f, 0.3f, 0.2f})};
   LobeTransferOptions options;
   LobeTransferStats stats;
-  const auto candidates = FindLobeDonors(LineAtlas(2), fits, NoneBorrowed(2), options, &stats);
-  ASSERT_EQ(candidates[1].size(), 1u);
+  FitStore store = Store(fits);
+  const LobeCandidates candidates = FindLobeDonors(LineAtlas(2), store, options, &stats);
+  ASSERT_EQ(candidates.Of(1).size(), 1u);
   const TexelSampleChunk chunk = Chunk({Samples(Glossy(), true), Samples(matte, true)});
-  std::vector<int64_t> donor(2, -1);
-  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &stats);
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &stats);
   EXPECT_EQ(stats.rejected, 1u);
   EXPECT_EQ(stats.transferred, 0u);
-  EXPECT_EQ(donor[1], -1);
-  EXPECT_TRUE(fits[1].lambert_only);
-  EXPECT_EQ(fits[1].params.lobes[0][0].cx, 0.0f);
+  EXPECT_EQ(store.donor(1), -1);
+  EXPECT_TRUE(store.lambert_only(1));
+  EXPECT_EQ(store.Get(1).params.lobes[0][0].cx, 0.0f);
 }
 
 TEST(LobeTransfer, ALobeFarAboveTheRecipientsBrightestSampleIsRefused) {
@@ -154,14 +168,14 @@ TEST(LobeTransfer, ALobeFarAboveTheRecipientsBrightestSampleIsRefused) {
   std::vector<TexelFit> fits = {DonorFit(bright), RecipientFit({0.4f, 0.3f, 0.2f})};
   LobeTransferOptions options;
   LobeTransferStats stats;
-  const auto candidates = FindLobeDonors(LineAtlas(2), fits, NoneBorrowed(2), options, &stats);
-  ASSERT_EQ(candidates[1].size(), 1u);
+  FitStore store = Store(fits);
+  const LobeCandidates candidates = FindLobeDonors(LineAtlas(2), store, options, &stats);
+  ASSERT_EQ(candidates.Of(1).size(), 1u);
   const TexelSampleChunk chunk = Chunk({Samples(bright, true), Samples(bright, false)});
-  std::vector<int64_t> donor(2, -1);
-  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &stats);
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &stats);
   EXPECT_EQ(stats.rejected, 1u);
-  EXPECT_EQ(donor[1], -1);
-  EXPECT_TRUE(fits[1].lambert_only);
+  EXPECT_EQ(store.donor(1), -1);
+  EXPECT_TRUE(store.lambert_only(1));
 }
 
 TEST(LobeTransfer, DisabledOrOutOfReachDoesNothing) {
@@ -174,14 +188,17 @@ TEST(LobeTransfer, DisabledOrOutOfReachDoesNothing) {
   LobeTransferOptions options;
   options.radius = 4;
   LobeTransferStats stats;
-  auto candidates = FindLobeDonors(atlas, fits, NoneBorrowed(fits.size()), options, &stats);
-  EXPECT_EQ(candidates[1].size(), 1u);
-  EXPECT_TRUE(candidates[2].empty());
+  const FitStore store = Store(fits);
+  LobeCandidates candidates = FindLobeDonors(atlas, store, options, &stats);
+  EXPECT_EQ(candidates.Of(1).size(), 1u);
+  EXPECT_TRUE(candidates.Of(2).empty());
   options.enabled = false;
   LobeTransferStats none;
-  candidates = FindLobeDonors(atlas, fits, NoneBorrowed(fits.size()), options, &none);
+  candidates = FindLobeDonors(atlas, store, options, &none);
   EXPECT_EQ(none.recipients, 0u);
-  for (const auto& c : candidates) EXPECT_TRUE(c.empty());
+  EXPECT_TRUE(candidates.recipients.empty());
+  EXPECT_TRUE(candidates.donors.empty());
+  for (uint32_t t = 0; t < 3; ++t) EXPECT_TRUE(candidates.Of(t).empty());
   // Options are checked.
   options.radius = 0;
   EXPECT_FALSE(options.Validate().ok());
@@ -203,19 +220,112 @@ TEST(LobeTransfer, ABorrowedLobeIsLentOnInTheNextRound) {
   options.radius = 4;
   const TexelSampleChunk chunk =
       Chunk({Samples(truth, true), Samples(truth, false), Samples(truth, false)});
-  std::vector<int64_t> donor = NoneBorrowed(3);
+  FitStore store = Store(fits);
   LobeTransferStats round1, round2;
-  auto candidates = FindLobeDonors(atlas, fits, donor, options, &round1);
-  EXPECT_TRUE(candidates[2].empty());
-  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &round1);
+  std::vector<uint8_t> lenders(3, 0);
+  LobeCandidates candidates = FindLobeDonors(atlas, store, options, &round1);
+  EXPECT_TRUE(candidates.Of(2).empty());
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &round1, &lenders);
   EXPECT_EQ(round1.transferred, 1u);
-  candidates = FindLobeDonors(atlas, fits, donor, options, &round2);
+  EXPECT_EQ(lenders, (std::vector<uint8_t>{0, 1, 0}));
+  candidates = FindLobeDonors(atlas, store, options, &round2, &lenders);
   EXPECT_EQ(round2.recipients, 1u);  // texel 1 borrowed: no longer a recipient
-  ASSERT_EQ(candidates[2].size(), 1u);
-  EXPECT_EQ(candidates[2][0], 1u);
-  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &fits, &donor, &round2);
-  EXPECT_EQ(donor[2], 1);
-  EXPECT_EQ(fits[2].params.lobes[0][1].n, truth.lobes[0][1].n);
+  ASSERT_EQ(candidates.Of(2).size(), 1u);
+  EXPECT_EQ(candidates.Of(2)[0], 1u);
+  ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &round2);
+  EXPECT_EQ(store.donor(2), 1);
+  EXPECT_EQ(store.Get(2).params.lobes[0][1].n, truth.lobes[0][1].n);
+}
+
+TEST(FitStore, KeepsEveryFieldOfTheFittedLobesAndStartsAsTooFewSamples) {
+  for (int lobes = 0; lobes <= brdf::kMaxLobes; ++lobes) {
+    FitStore store(3, lobes);
+    EXPECT_EQ(store.ParamsPerTexel(), 3 + 12 * lobes);
+    // A texel no chunk held: BeginTexel's state, status kTooFewSamples, no donor.
+    const TexelFit empty = store.Get(2);
+    EXPECT_EQ(empty.status, FitStatus::kTooFewSamples);
+    EXPECT_EQ(empty.params.num_lobes, lobes);
+    EXPECT_EQ(empty.sigma.rho_d[1], -1.0f);
+    EXPECT_EQ(store.donor(2), -1);
+    // Every slot of the fitted lobes survives exactly; distinct values catch a swapped slot.
+    TexelFit f;
+    f.params.num_lobes = f.sigma.num_lobes = lobes;
+    float v = 0.5f;
+    for (int c = 0; c < brdf::kChannels; ++c) {
+      f.params.rho_d[c] = v += 1;
+      f.sigma.rho_d[c] = -v;
+    }
+    for (int k = 0; k < lobes; ++k) {
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        f.params.lobes[k][c] = {v + 1, v + 2, v + 3, v + 4};
+        f.sigma.lobes[k][c] = {-v - 1, -v - 2, -v - 3, -v - 4};
+        v += 4;
+      }
+    }
+    f.status = FitStatus::kMaxIterations;
+    f.cost = 12.25f;
+    f.iterations = 37;
+    f.samples = 41;
+    f.residuals = 120;
+    f.lambert_only = true;
+    store.Set(1, f);
+    store.set_donor(1, 0);
+    const TexelFit g = store.Get(1);
+    EXPECT_EQ(g.params.rho_d, f.params.rho_d);
+    EXPECT_EQ(g.sigma.rho_d[0], -1.0f);  // sigmas are not held (SigmaSpill)
+    for (int k = 0; k < lobes; ++k) {
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        EXPECT_EQ(g.params.lobes[k][c].cx, f.params.lobes[k][c].cx);
+        EXPECT_EQ(g.params.lobes[k][c].cy, f.params.lobes[k][c].cy);
+        EXPECT_EQ(g.params.lobes[k][c].cz, f.params.lobes[k][c].cz);
+        EXPECT_EQ(g.params.lobes[k][c].n, f.params.lobes[k][c].n);
+      }
+    }
+    EXPECT_EQ(g.status, f.status);
+    EXPECT_EQ(g.cost, f.cost);
+    EXPECT_EQ(g.iterations, f.iterations);
+    EXPECT_EQ(g.samples, f.samples);
+    EXPECT_EQ(g.residuals, f.residuals);
+    EXPECT_TRUE(g.lambert_only);
+    EXPECT_EQ(store.donor(1), 0);
+    // Releasing the parameter arrays keeps the scalars the report reads.
+    store.ReleaseParams();
+    EXPECT_EQ(store.status(1), FitStatus::kMaxIterations);
+    EXPECT_EQ(store.cost(1), 12.25f);
+    EXPECT_EQ(store.residuals(1), 120);
+  }
+}
+
+TEST(SigmaSpill, ReadsBackWhatWasWrittenAndUnknownElsewhere) {
+  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / "sigma.scratch";
+  // Two lobes, 40000 texels: more than one read block; the chunk written straddles a block edge.
+  auto spill = SigmaSpill::Create(path, 40000, 2);
+  ASSERT_TRUE(spill.ok()) << spill.status().ToString();
+  std::vector<TexelFit> chunk(3);
+  for (size_t i = 0; i < chunk.size(); ++i) {
+    chunk[i].sigma.num_lobes = 2;
+    chunk[i].sigma.rho_d = {float(i), 0.5f, 0.25f};
+    chunk[i].sigma.lobes[1][2] = {1.5f, 2.5f, 3.5f, float(10 + i)};
+  }
+  ASSERT_TRUE((*spill)->Write(16383, chunk).ok());
+  size_t seen = 0;
+  ASSERT_TRUE((*spill)->ReadAll([&](size_t t, const float* sigma) {
+    EXPECT_EQ(t, seen++);
+    if (t >= 16383 && t < 16386) {
+      EXPECT_EQ(sigma[0], float(t - 16383));
+      EXPECT_EQ(sigma[1], 0.5f);
+      EXPECT_EQ(sigma[3], 0.0f);  // lobe 0, R, Cx
+      const float* lobe1_b = sigma + 3 + 4 * (3 * 1 + 2);
+      EXPECT_EQ(lobe1_b[2], 3.5f);
+      EXPECT_EQ(lobe1_b[3], float(10 + t - 16383));
+    } else if (t % 997 == 0) {
+      for (int i = 0; i < 3 + 12 * 2; ++i) EXPECT_EQ(sigma[i], -1.0f);
+    }
+  }).ok());
+  EXPECT_EQ(seen, 40000u);
+  EXPECT_TRUE(std::filesystem::exists(path));
+  EXPECT_TRUE((*spill)->Remove().ok());
+  EXPECT_FALSE(std::filesystem::exists(path));
 }
 
 }  // namespace
