@@ -131,7 +131,8 @@ struct FitOptions {
   // Lobe identifiability: some valid sample must see wo within this angle (degrees) of the
   // mirror direction of wi, else kUnidentifiableLobe. In (0, 90].
   double highlight_cone_deg = 10.0;
-  // Lobe evidence: the brightest excess over the start's Lambert level must exceed this many
+  // Lobe evidence: the brightest excess over the start's Lambert level among the samples within
+  // 45 degrees of the mirror configuration (problem.h kEvidenceConeDeg) must exceed this many
   // robust noise σ (from the lower quartile, problem.h) plus 2 % of that level, else the texel
   // is fitted Lambert-only (lobe absent, status kConverged). >= 0.
   double evidence_sigmas = 5.0;

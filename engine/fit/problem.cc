@@ -85,7 +85,10 @@ struct ChannelStats {
   double excess = 0;  // its value above rho0 / pi
 };
 
-ChannelStats Stats(const ProblemArena& arena, size_t begin, int n, float* scratch) {
+// min_mirror_cos: only samples within the evidence cone (cos of their angle to the mirror
+// configuration at least this) can be the brightest (the lobe evidence); all enter the median.
+ChannelStats Stats(const ProblemArena& arena, size_t begin, int n, float* scratch,
+                   double min_mirror_cos) {
   ChannelStats s;
   if (n == 0) return s;
   for (int i = 0; i < n; ++i) scratch[i] = arena.y[begin + i];
@@ -96,7 +99,10 @@ ChannelStats Stats(const ProblemArena& arena, size_t begin, int n, float* scratc
   s.sigma = (s.median - q1) / kQuartileToSigma;
   s.excess = -1e300;
   for (int i = 0; i < n; ++i) {
-    const double e = arena.y[begin + i] - s.median;  // rho0 / pi = median
+    const size_t r = begin + i;
+    // cos of the angle between wo and the mirror of wi, from the direction products.
+    if (-double(arena.xx[r]) - arena.yy[r] + arena.zz[r] < min_mirror_cos) continue;
+    const double e = arena.y[r] - s.median;  // rho0 / pi = median
     if (e > s.excess) {
       s.excess = e;
       s.brightest = i;
@@ -131,6 +137,8 @@ void PrepareTexel(const FitOptions& options, const ProblemLayout& layout,
   // 1. Directions once per sample (products and validity into the scratch), the cone test on
   // the way; then the residuals of each channel, raw values and weights.
   const double cone_cos = std::cos(DegToRad(options.highlight_cone_deg));
+  const double evidence_cos =
+      std::cos(DegToRad(std::max(kEvidenceConeDeg, options.highlight_cone_deg)));
   bool near_mirror = false;
   float* products = arena->products.data();  // xx, yy, zz per sample; NaN marks unusable ones
   for (size_t i = 0; i < count; ++i) {
@@ -229,7 +237,7 @@ void PrepareTexel(const FitOptions& options, const ProblemLayout& layout,
     ChannelStats stats[3];
     for (int c = c_begin; c < c_end; ++c) {
       stats[c] = Stats(*arena, block_begin[c], int(block_begin[c + 1] - block_begin[c]),
-                       arena->scratch.data());
+                       arena->scratch.data(), evidence_cos);
       x[model == LobeModel::kShared ? c : 0] = std::max(0.0, kPi * stats[c].median);
     }
     if (n == 0) {

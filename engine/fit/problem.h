@@ -25,8 +25,13 @@
 //   4. Start values and stages: seed.h (StartValues).
 //
 // Lobe evidence: with rho0 the seed's start albedo (π x the median value) and σ the noise
-// estimated from the values' lower quartile (kQuartileToSigma), some valid value must exceed
-// rho0 / π by more than evidence_sigmas σ + kEvidenceFloor rho0 / π (any channel for shared).
+// estimated from the values' lower quartile (kQuartileToSigma), some valid value within
+// kEvidenceConeDeg of the mirror configuration (or within highlight_cone_deg, if wider) must
+// exceed rho0 / π by more than evidence_sigmas σ + kEvidenceFloor rho0 / π (any channel for
+// shared). A bright sample far from the mirror is no evidence of a specular lobe: it is an
+// outlier (on synthetic captures such samples, up to 20 σ from the diffuse level either way,
+// cluster on texels at atlas chart borders), or light that a lobe would also have put into the
+// samples nearer the mirror, which did not show it.
 //
 // FinishProblem, per solved problem: the rank test on the final J^T J (kSingular), parameter
 // standard deviations, the map to natural units, and the texel's combined status.
@@ -47,6 +52,14 @@ constexpr double kMinDirectionNorm = 0.5;
 // Lobe evidence floor: a lobe peaking less than 2 % above the diffuse level cannot be told from
 // calibration error of the irradiance (a few percent), whatever the noise.
 constexpr double kEvidenceFloor = 0.02;
+// The lobe-evidence test looks for its sample within 45 degrees of the mirror configuration:
+// a lobe of exponent 2 is still at half its peak there, so every lobe worth fitting shows its
+// evidence inside the cone, while the outliers of the rest of the hemisphere are ignored.
+// Measured on an all-matte synthetic capture (`synth --materials matte`): without the cone 1.4 %
+// of the texels fitted a spurious lobe from such a sample and lent it on, costing 2.2 dB of
+// holdout PSNR (38.01 dB against 40.18 dB for a Lambert-only fit); with it, 40.16 dB. suzanne and
+// all six DiLiGenT objects score the same with and without it (README.md).
+constexpr double kEvidenceConeDeg = 45;
 // The noise σ of the lobe-evidence test is (median - lower quartile) / 0.6745, Gaussian σ from
 // the lower half of the values only: a lobe lifts the upper half (and would inflate a MAD), the
 // lower half is diffuse level plus noise (and shadows, which only make the test stricter).
