@@ -195,8 +195,17 @@ Status WriteExrImpl(const fs::path& path, const Image& image, const std::vector<
     half_data.resize(image.data.size());
     for (size_t i = 0; i < image.data.size(); ++i) half_data[i] = sanitize(image.data[i]);
   } else {
-    float_data.resize(image.data.size());
-    for (size_t i = 0; i < image.data.size(); ++i) float_data[i] = sanitize(image.data[i]);
+    // Float output copies only when some value needs sanitising: a full-atlas map is written
+    // straight from the caller's image, so writing it does not double its memory.
+    bool clean = true;
+    for (size_t i = 0; i < image.data.size() && clean; ++i) {
+      const float x = image.data[i];
+      clean = !std::isnan(x) && x <= sanitize.max_finite && x >= -sanitize.max_finite;
+    }
+    if (!clean) {
+      float_data.resize(image.data.size());
+      for (size_t i = 0; i < image.data.size(); ++i) float_data[i] = sanitize(image.data[i]);
+    }
   }
   if (sanitize.nan_count > 0 || sanitize.clamp_count > 0) {
     std::string message = path.string() + ":";
@@ -213,8 +222,11 @@ Status WriteExrImpl(const fs::path& path, const Image& image, const std::vector<
 
   const Imf::PixelType pixel_type = half ? Imf::HALF : Imf::FLOAT;
   const size_t value_size = half ? sizeof(Imath::half) : sizeof(float);
-  char* base =
-      half ? reinterpret_cast<char*>(half_data.data()) : reinterpret_cast<char*>(float_data.data());
+  // OpenEXR's Slice takes a char* for reading and writing alike; the output file only reads it.
+  char* base = half ? reinterpret_cast<char*>(half_data.data())
+               : float_data.empty()
+                   ? reinterpret_cast<char*>(const_cast<float*>(image.data.data()))
+                   : reinterpret_cast<char*>(float_data.data());
   const size_t x_stride = value_size * size_t(image.channels);
   const size_t y_stride = x_stride * size_t(image.width);
 
