@@ -41,6 +41,10 @@ int RunFit(int argc, char** argv) {
   args.AddString("init", &init, "NAME",
                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  bool no_albedo_fill = false;
+  args.AddFlag("no-albedo-fill", &no_albedo_fill,
+               "leave texels with no sample at zero albedo instead of giving them the mean albedo "
+               "of the texels around them");
   args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
                "keep Lambert-only the texels that never saw their mirror configuration, instead "
                "of lending them a similar neighbour's lobe");
@@ -93,6 +97,7 @@ int RunFit(int argc, char** argv) {
   options.lobe_model = *model;
   options.select_lobe_model = auto_model;
   options.lobe_transfer.enabled = !no_lobe_transfer;
+  options.albedo_fill.enabled = !no_albedo_fill;
   options.init = *init_scheme;
   options.loss = *loss_kind;
   if (Status s = options.Validate(); !s.ok()) {

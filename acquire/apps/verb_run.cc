@@ -148,6 +148,10 @@ int RunRun(int argc, char** argv) {
                  "aniso (default), iso, shared, or auto (aniso or iso per texel by BIC)");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  bool no_albedo_fill = false;
+  args.AddFlag("no-albedo-fill", &no_albedo_fill,
+               "leave texels with no sample at zero albedo instead of giving them the mean albedo "
+               "of the texels around them");
   args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
                "keep Lambert-only the texels that never saw their mirror configuration, instead "
                "of lending them a similar neighbour's lobe");
@@ -189,6 +193,7 @@ int RunRun(int argc, char** argv) {
   options.fit.lobe_model = *model;
   options.fit.select_lobe_model = auto_model;
   options.fit.lobe_transfer.enabled = !no_lobe_transfer;
+  options.fit.albedo_fill.enabled = !no_albedo_fill;
   options.fit.init = *init_scheme;
   options.fit.loss = *loss_kind;
   for (const Status& s : {options.resample.Validate(), options.fit.Validate()}) {

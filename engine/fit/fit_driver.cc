@@ -15,6 +15,7 @@
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
+#include "engine/fit/albedo_fill.h"
 #include "engine/fit/lobe_transfer.h"
 #include "engine/fit/problem.h"
 #include "engine/image/exr_io.h"
@@ -82,25 +83,28 @@ void ReleaseFreeHeap() {
 }  // namespace
 
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
-                    SigmaSpill* sigma) {
+                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled) {
   REFLCAP_CHECK(fits->size() == atlas.TexelCount());
   REFLCAP_CHECK(sigma->lobes() == fits->lobes());
+  REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits->size());
   {
-    Image status(atlas.width, atlas.height, 4, 0.0f);
+    constexpr int kStatusChannels = 5;
+    Image status(atlas.width, atlas.height, kStatusChannels, 0.0f);
     for (size_t p = 0; p < status.PixelCount(); ++p) {
-      status.data[4 * p] = float(gpu::shared::kFitStatusNoTexel);
-      status.data[4 * p + 3] = -1;
+      status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
+      status.data[kStatusChannels * p + 3] = -1;
     }
     for (size_t t = 0; t < fits->size(); ++t) {
-      float* px = &status.data[4 * size_t(atlas.pixel_of_texel[t])];
+      float* px = &status.data[kStatusChannels * size_t(atlas.pixel_of_texel[t])];
       px[0] = float(int(fits->status(t)));
       px[1] = float(fits->iterations(t));
       px[2] = fits->cost(t);
       // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
       px[3] = float(fits->donor(t));
+      px[4] = albedo_filled.empty() ? 0.0f : float(albedo_filled[t]);
     }
-    REFLCAP_RETURN_IF_ERROR(
-        WriteExrChannels(dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor"}));
+    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(
+        dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor", "albedo_filled"}));
   }
   const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
   const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
@@ -247,9 +251,16 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   }
   const double transfer_seconds = Seconds(transfer_start);
 
+  // Albedo fill (albedo_fill.h): texels no train photograph lit and saw.
+  const auto fill_start = std::chrono::steady_clock::now();
+  std::vector<uint8_t> albedo_filled;
+  const AlbedoFillStats fill = FillUnseenAlbedo(atlas, options.albedo_fill, &fits, &albedo_filled);
+  const double fill_seconds = Seconds(fill_start);
+
   const auto write_start = std::chrono::steady_clock::now();
   ReleaseFreeHeap();
-  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, &fits, sigma.get()));
+  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, &fits, sigma.get(), albedo_filled));
+  albedo_filled = std::vector<uint8_t>();
   REFLCAP_RETURN_IF_ERROR(sigma->Remove());
 
   std::vector<double> costs, chi2;
@@ -299,6 +310,10 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
           {"albedo_tolerance", options.lobe_transfer.albedo_tolerance},
           {"max_cost_increase", options.lobe_transfer.max_cost_increase},
           {"rounds", options.lobe_transfer.rounds}}},
+        {"albedo_fill",
+         {{"enabled", options.albedo_fill.enabled},
+          {"radius", options.albedo_fill.radius},
+          {"rounds", options.albedo_fill.rounds}}},
         {"step_tolerance", options.step_tolerance},
         {"cost_tolerance", options.cost_tolerance},
         {"gradient_tolerance", options.gradient_tolerance}}},
@@ -313,6 +328,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"rejected", transfer.rejected},
         {"transferred", transfer.transferred},
         {"rounds", transfer.rounds}}},
+      {"albedo_fill", {{"unseen", fill.unseen}, {"filled", fill.filled}, {"rounds", fill.rounds}}},
       {"cost_percentiles", Percentiles(std::move(costs))},
       {"reduced_chi2_percentiles", Percentiles(std::move(chi2))},
       {"iterations", {{"mean", summary.texels_with_samples ? iterations / summary.texels_with_samples : 0.0},
@@ -327,6 +343,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   report["timings_s"] = {{"read_wait", read_seconds},
                          {"fit", fit_seconds},
                          {"lobe_transfer", transfer_seconds},
+                         {"albedo_fill", fill_seconds},
                          {"write_maps", write_seconds_so_far},
                          {"total", summary.total_seconds}};
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / "fit_report.json", report.dump(2) + "\n"));

@@ -51,8 +51,9 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
 // `dir`, one map at a time, each built straight from the store and the spill (no per-texel
 // BrdfParams copy). A texel with a lobe donor gets albedo sigmas -1 (re-fitted, not measured).
 // Releases the store's parameters once their map is built (FitStore::ReleaseParams): afterwards
-// only its scalars remain.
+// only its scalars remain. `albedo_filled` (one byte per texel, or empty for none) marks the
+// texels albedo_fill.h filled: status.exr's `albedo_filled` channel (1 = filled).
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, FitStore* fits,
-                    SigmaSpill* sigma);
+                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled = {});
 
 }  // namespace reflcap::fit

@@ -94,6 +94,22 @@ struct LobeTransferOptions {
   Status Validate() const;
 };
 
+// Albedo fill (engine/fit/albedo_fill.h): after the fit, a texel with no valid sample (no train
+// photograph lit and saw it) takes the mean albedo of the texels around it that have one, so a
+// held-out view that lights it shows the surrounding material instead of black. Applied by
+// RunFit, not by Fitter::Fit.
+struct AlbedoFillOptions {
+  bool enabled = true;
+  // Window half-size in atlas texels per round. 2: a 5 x 5 window, inside one material region.
+  int radius = 2;
+  // Rounds: round r also draws on the texels filled in round r - 1, so a hole fills inwards up to
+  // radius x rounds texels from its rim (32 by default: the dimples and crevices no light
+  // reached, not the underside of an object that no camera saw either).
+  int rounds = 16;
+
+  Status Validate() const;
+};
+
 struct FitOptions {
   // Lafortune lobes per texel, 0..3 (0 = Lambert only; at most 2 for the shared lobe model).
   int lobes = 1;
@@ -146,6 +162,7 @@ struct FitOptions {
   // Worker threads (0 = all hardware threads).
   int threads = 0;
   LobeTransferOptions lobe_transfer;
+  AlbedoFillOptions albedo_fill;
 
   Status Validate() const;
   std::string ToString() const;

@@ -2,7 +2,8 @@
 // the executable: lobe transfer must never cost holdout PSNR against the same fit without it,
 // and the lobe must beat the Lambert-only baseline. The rig is the one on which lobe transfer
 // without its evidence bound (engine/fit/lobe_transfer.h) fell to 19.8 dB against 33.8 dB
-// without transfer: wrong borrowed lobes made a few holdout images many times too bright.
+// without transfer: wrong borrowed lobes made a few holdout images many times too bright. And the
+// in-model noise bound on an all-matte capture.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -59,6 +60,29 @@ TEST(PipelineAccuracy, LobeTransferNeverCostsHoldoutPsnrAndTheLobeBeatsLambert) 
   EXPECT_GE(psnr[0], psnr[1] - kTransferMayCostDb);
   EXPECT_GT(psnr[1], psnr[2] + kMinLobeGainDb);
   EXPECT_LT(psnr[0], bound);  // a PSNR above what the noise allows would mean a broken metric
+}
+
+// The in-model bound (issue: holdout PSNR within 0.5 dB of what the capture's noise allows),
+// on a capture whose every texel the model identifies: one matte material (a Lafortune fit with
+// no lobe is in the model). Measured 0.22 dB from the bound; 0.5 dB is the goal itself. Without
+// the lobe-evidence cone (engine/fit/problem.h) spurious lobes put it 2.7 dB away; without the
+// albedo fill (engine/fit/albedo_fill.h) unlit dimples put it 0.51 dB away.
+constexpr double kInModelGapDb = 0.5;
+
+TEST(PipelineAccuracy, AllMatteInModelCaptureReachesTheNoiseBound) {
+  testing::ScratchDir dir;
+  const std::string capture = (dir / "capture").string();
+  auto r = RunCli("synth --quiet --materials matte --out " + capture, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path out = dir / "run";
+  r = RunCli("run --quiet --backend cpu " + capture + " --out " + out.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto overall = Overall(out);
+  const double psnr = overall["psnr_db"].get<double>();
+  const double bound = overall["noise_bound_psnr_db"].get<double>();
+  std::printf("all-matte capture: holdout PSNR %.2f dB, noise bound %.2f dB\n", psnr, bound);
+  EXPECT_GT(psnr, bound - kInModelGapDb);
+  EXPECT_LT(psnr, bound);
 }
 
 }  // namespace

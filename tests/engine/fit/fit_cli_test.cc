@@ -100,8 +100,10 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   std::vector<std::string> names;
   auto status = ReadExrChannels(out / "status.exr", &names);
   ASSERT_TRUE(status.ok()) << status.status().ToString();
-  EXPECT_EQ(names, (std::vector<std::string>{"cost", "iterations", "lobe_donor", "status"}));
-  const int status_channel = 3;
+  EXPECT_EQ(names, (std::vector<std::string>{"albedo_filled", "cost", "iterations", "lobe_donor",
+                                             "status"}));
+  const int status_channel = 4;
+  EXPECT_EQ(status->at(1, 0, 0), 0.0f);  // albedo_filled: texel 1 has samples
   EXPECT_EQ(status->at(0, 0, status_channel), -1.0f);  // pixel 0 holds no texel
   EXPECT_EQ(status->at(1, 0, status_channel), float(int(FitStatus::kConverged)));
 
@@ -115,6 +117,8 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   EXPECT_EQ(report["texels"], kTexels);
   EXPECT_EQ(report["status_counts"]["converged"], kTexels);
   EXPECT_GT(report["fits_per_second"].get<double>(), 0);
+  EXPECT_EQ(report["options"]["albedo_fill"]["enabled"], true);
+  EXPECT_EQ(report["albedo_fill"]["unseen"], 0);  // every texel has samples
   for (const char* key : {"device", "cost_percentiles", "timings_s", "options", "iterations"}) {
     EXPECT_TRUE(report.contains(key)) << key;
   }
@@ -122,11 +126,13 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   // An existing non-empty FIT is refused (bad input), replaced with --overwrite.
   EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string(), dir).exit_code, 2);
   EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string() +
-                       " --overwrite --backend ceres --lobe-model shared --loss cauchy --quiet",
+                       " --overwrite --backend ceres --lobe-model shared --loss cauchy"
+                       " --no-albedo-fill --quiet",
                    dir).exit_code, 0);
   const Json ceres = Json::parse(ReadTextFile(out / "fit_report.json").value());
   EXPECT_EQ(ceres["backend"], "ceres");
   EXPECT_EQ(ceres["options"]["lobe_model"], "shared");
+  EXPECT_EQ(ceres["options"]["albedo_fill"]["enabled"], false);
 }
 
 // --lobe-model auto: each texel keeps the anisotropic or the isotropic fit, the better by BIC.

@@ -3,13 +3,32 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <string>
 #include <vector>
 
+#include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
 #include "engine/fit/synthetic_samples.h"
+#include "engine/mesh/texel_atlas.h"
 
 namespace reflcap::fit::testing {
+
+// The fits as the FIT driver holds them (one lobe per texel), none borrowed or filled yet.
+inline FitStore StoreOf(const std::vector<TexelFit>& fits) {
+  FitStore store(fits.size(), 1);
+  for (size_t t = 0; t < fits.size(); ++t) store.Set(t, fits[t]);
+  return store;
+}
+
+// A texels x 1 atlas whose texel t is pixel t.
+inline TexelAtlas LineAtlas(int texels) {
+  TexelAtlas atlas;
+  atlas.width = texels;
+  atlas.height = 1;
+  for (int t = 0; t < texels; ++t) atlas.pixel_of_texel.push_back(uint32_t(t));
+  return atlas;
+}
 
 inline double RelativeError(double estimate, double truth) {
   return std::abs(estimate - truth) / std::max(std::abs(truth), 1e-12);

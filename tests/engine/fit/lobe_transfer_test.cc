@@ -12,10 +12,14 @@
 
 #include "engine/brdf/lafortune.h"
 #include "engine/fit/fit_store.h"
+#include "tests/engine/fit/fit_test_util.h"
 #include "engine/math/types.h"
 
 namespace reflcap::fit {
 namespace {
+
+using testing::LineAtlas;
+using testing::StoreOf;
 
 // The glossy material the tests use: albedo (0.4, 0.3, 0.2) and a mirror lobe of peak `peak` / sr,
 // n = 40 (half-width ~11 degrees). Peak 0.5 stays within the transfer's evidence bound (10x the
@@ -47,21 +51,6 @@ TexelFit RecipientFit(const std::array<float, 3>& rho) {
   f.lambert_only = true;
   f.samples = 24;
   return f;
-}
-
-// The fits as the driver holds them (one lobe per texel), none borrowed yet.
-FitStore Store(const std::vector<TexelFit>& fits) {
-  FitStore store(fits.size(), 1);
-  for (size_t t = 0; t < fits.size(); ++t) store.Set(t, fits[t]);
-  return store;
-}
-
-TexelAtlas LineAtlas(int texels) {
-  TexelAtlas atlas;
-  atlas.width = texels;
-  atlas.height = 1;
-  for (int t = 0; t < texels; ++t) atlas.pixel_of_texel.push_back(uint32_t(t));
-  return atlas;
 }
 
 Vec3f Direction(double theta_deg, double phi_deg) {
@@ -114,7 +103,7 @@ TEST(LobeTransfer, ASimilarNeighboursLobeIsLentWhenTheSamplesAgree) {
   const TexelAtlas atlas = LineAtlas(4);
   LobeTransferOptions options;
   LobeTransferStats stats;
-  FitStore store = Store(fits);
+  FitStore store = StoreOf(fits);
   const LobeCandidates candidates = FindLobeDonors(atlas, store, options, &stats);
   EXPECT_EQ(stats.recipients, 2u);
   EXPECT_EQ(stats.no_donor, 1u);  // texel 2: no donor within the albedo tolerance
@@ -149,7 +138,7 @@ TEST(LobeTransfer, SamplesThatContradictTheLobeRefuseIt) {
   std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit({0.4f, 0.3f, 0.2f})};
   LobeTransferOptions options;
   LobeTransferStats stats;
-  FitStore store = Store(fits);
+  FitStore store = StoreOf(fits);
   const LobeCandidates candidates = FindLobeDonors(LineAtlas(2), store, options, &stats);
   ASSERT_EQ(candidates.Of(1).size(), 1u);
   const TexelSampleChunk chunk = Chunk({Samples(Glossy(), true), Samples(matte, true)});
@@ -168,7 +157,7 @@ TEST(LobeTransfer, ALobeFarAboveTheRecipientsBrightestSampleIsRefused) {
   std::vector<TexelFit> fits = {DonorFit(bright), RecipientFit({0.4f, 0.3f, 0.2f})};
   LobeTransferOptions options;
   LobeTransferStats stats;
-  FitStore store = Store(fits);
+  FitStore store = StoreOf(fits);
   const LobeCandidates candidates = FindLobeDonors(LineAtlas(2), store, options, &stats);
   ASSERT_EQ(candidates.Of(1).size(), 1u);
   const TexelSampleChunk chunk = Chunk({Samples(bright, true), Samples(bright, false)});
@@ -188,7 +177,7 @@ TEST(LobeTransfer, DisabledOrOutOfReachDoesNothing) {
   LobeTransferOptions options;
   options.radius = 4;
   LobeTransferStats stats;
-  const FitStore store = Store(fits);
+  const FitStore store = StoreOf(fits);
   LobeCandidates candidates = FindLobeDonors(atlas, store, options, &stats);
   EXPECT_EQ(candidates.Of(1).size(), 1u);
   EXPECT_TRUE(candidates.Of(2).empty());
@@ -220,7 +209,7 @@ TEST(LobeTransfer, ABorrowedLobeIsLentOnInTheNextRound) {
   options.radius = 4;
   const TexelSampleChunk chunk =
       Chunk({Samples(truth, true), Samples(truth, false), Samples(truth, false)});
-  FitStore store = Store(fits);
+  FitStore store = StoreOf(fits);
   LobeTransferStats round1, round2;
   std::vector<uint8_t> lenders(3, 0);
   LobeCandidates candidates = FindLobeDonors(atlas, store, options, &round1);
@@ -297,7 +286,7 @@ TEST(FitStore, KeepsEveryFieldOfTheFittedLobesAndStartsAsTooFewSamples) {
 }
 
 TEST(SigmaSpill, ReadsBackWhatWasWrittenAndUnknownElsewhere) {
-  const std::filesystem::path path = std::filesystem::path(testing::TempDir()) / "sigma.scratch";
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "sigma.scratch";
   // Two lobes, 40000 texels: more than one read block; the chunk written straddles a block edge.
   auto spill = SigmaSpill::Create(path, 40000, 2);
   ASSERT_TRUE(spill.ok()) << spill.status().ToString();
