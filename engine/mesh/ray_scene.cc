@@ -1,8 +1,12 @@
 // RayScene over Embree 3: one device and one scene per RayScene, a single triangle geometry with
 // its own copies of the positions and indices (rtcSetNewGeometryBuffer allocates them with the
 // padding Embree's SIMD loads need past the last vertex). The scene is built with
-// RTC_BUILD_QUALITY_HIGH (spatial splits; queries dominate) and RTC_SCENE_FLAG_ROBUST (watertight
-// edge tests, so rays through shared edges and vertices cannot slip between triangles).
+// RTC_BUILD_QUALITY_HIGH (spatial splits; queries dominate) and without RTC_SCENE_FLAG_ROBUST:
+// robust traversal cost 1.34x in occlusion rays (16-wide packets, 2 threads: 12.2 M rays/s with
+// it, 16.4 M without) and changed no visibility or shadow decision on the suzanne and synth
+// captures (identical occluded and shadowed counts; 0.007 % of the footprint-edge rejections,
+// which test primary hits at silhouettes, moved). Neither mode is exactly watertight: a ray
+// exactly along a shared edge can slip through in both (Embree issue #387).
 // After Embree's tutorials/minimal/minimal.cpp.
 #include "engine/mesh/ray_scene.h"
 
@@ -182,7 +186,7 @@ StatusOr<std::unique_ptr<RayScene>> RayScene::Create(const TriangleMesh& mesh) {
     REFLCAP_RETURN_IF_ERROR(impl.CreationError("rtcNewScene"));
     return InternalError("Embree: rtcNewScene returned no scene");
   }
-  rtcSetSceneFlags(impl.scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneFlags(impl.scene, RTC_SCENE_FLAG_NONE);
   rtcSetSceneBuildQuality(impl.scene, RTC_BUILD_QUALITY_HIGH);
 
   RTCGeometry geometry = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
