@@ -9,7 +9,7 @@
 // measured), its sigmas stay -1, and status.exr's `albedo_filled` channel marks it.
 //
 // Measured (holdout PSNR / relative RMSE, default fit, then with the fill): all-matte synth
-// capture 40.16 -> 40.45 dB (noise bound 40.67 dB); broad-material synth 39.96 -> 40.15 dB;
+// capture 40.14 -> 40.42 dB (noise bound 40.67 dB); broad-material synth 39.95 -> 40.14 dB;
 // DiLiGenT bear 0.1419 -> 0.1385, buddha 0.2012 -> 0.1955, cat 0.1395 -> 0.1381, goblet
 // 0.2638 -> 0.2622, pot1 0.1193 -> 0.1152; ball16, suzanne and the demo unchanged (no holdout
 // view lights their unseen texels).

@@ -64,9 +64,9 @@ TEST(PipelineAccuracy, LobeTransferNeverCostsHoldoutPsnrAndTheLobeBeatsLambert) 
 
 // The in-model bound (issue: holdout PSNR within 0.5 dB of what the capture's noise allows),
 // on a capture whose every texel the model identifies: one matte material (a Lafortune fit with
-// no lobe is in the model). Measured 0.22 dB from the bound; 0.5 dB is the goal itself. Without
+// no lobe is in the model). Measured 0.25 dB from the bound; 0.5 dB is the goal itself. Without
 // the lobe-evidence cone (engine/fit/problem.h) spurious lobes put it 2.7 dB away; without the
-// albedo fill (engine/fit/albedo_fill.h) unlit dimples put it 0.51 dB away.
+// albedo fill (engine/fit/albedo_fill.h) unlit dimples put it 0.53 dB away.
 constexpr double kInModelGapDb = 0.5;
 
 TEST(PipelineAccuracy, AllMatteInModelCaptureReachesTheNoiseBound) {
