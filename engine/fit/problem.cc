@@ -81,7 +81,8 @@ float Median(float* v, int n) {
 struct ChannelStats {
   double median = 0;  // normalised
   double sigma = 0;   // (median - lower quartile) / 0.6745, normalised
-  int brightest = -1; // residual index (within the problem's arrays) of the largest excess
+  int brightest = -1; // residual index (within the problem's arrays) of the largest excess among
+                      // the samples in the evidence cone; -1 when none is
   double excess = 0;  // its value above rho0 / pi
 };
 
