@@ -115,7 +115,7 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     for (size_t t = 0; t < fits->size(); ++t) {
       PutTexel(channel, fits->params(t), &params.data[size_t(atlas.pixel_of_texel[t]) * n]);
     }
-    // Freed before the writer makes its own copy of the image.
+    // The parameters are in the image now: freed before it is written.
     fits->ReleaseParams();
     REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "params.exr", params, names, ExrPixelType::kFloat));
   }
