@@ -15,7 +15,7 @@
 // it cannot either. t_plane may lie far in front of p when the light grazes the surface (which
 // only lets light through, never adds shadow); it is limited to shadow_bias.z texel footprints
 // behind p (which would add shadow). p is in shadow when stored < t_plane - bias, with
-//   bias = shadow_bias.x + shadow_bias.y * footprint * (1 + min(tan θ, kMaxShadowSlope)):
+//   bias = shadow_bias.x + shadow_bias.y * footprint * (1 + min(tan θ, kMaxLightMapSlope)):
 //   shadow_bias.x  the CPU renderer's surface offset (1e-5 of the object's size): float rounding;
 //   shadow_bias.y  texel footprints (the texel's width across the light at p's distance) for what
 //                  the plane does not model: a concave receiver — neighbouring facets tilted
@@ -26,13 +26,15 @@
 // shadows start a few footprints late (further at grazing light, where the lit radiance, ∝ cos θ,
 // is small anyway); the default resolution puts several shadow texels in an image pixel, so this
 // stays within a pixel of the shadow edge. Shadow edges are quantised to shadow texels (one
-// sample, no filtering, so the result stays binary like the CPU's occlusion ray).
+// sample, no filtering, so the result stays binary like the CPU's occlusion ray). The test itself
+// is common/light_map.glsl's LightMapShadowed, which the Vulkan masks call too.
 #ifndef REFLCAP_SHADERS_RENDER_SHADING_GLSL_
 #define REFLCAP_SHADERS_RENDER_SHADING_GLSL_
 
 #define REFLCAP_RENDER_SHADING
 #include "render/material.glsl"
 #include "render/render_inputs.glsl"
+#include "common/light_map.glsl"
 
 // Eigen's unitOrthogonal() for a 3-vector (float: isMuchSmallerThan at 1e-5), which the CPU
 // renderer uses when a texel's tangent is parallel to the shading normal.
@@ -78,57 +80,13 @@ bool TexelOfHit(vec2 uv, out ivec2 texel) {
   return false;
 }
 
-// The shadow-map view that holds the direction from the light to p: face of the cube map by the
-// major axis of p - light (+X, -X, +Y, -Y, +Z, -Z), or the only view.
-int ShadowViewOf(vec3 p) {
-  if (params.num_shadow_views < 6u) return 0;
-  vec3 d = p - params.light.xyz;
-  vec3 a = abs(d);
-  if (a.x >= a.y && a.x >= a.z) return d.x >= 0.0 ? 0 : 1;
-  if (a.y >= a.z) return d.y >= 0.0 ? 2 : 3;
-  return d.z >= 0.0 ? 4 : 5;
-}
-
-// Slope term of the shadow bias (see the file comment): tan θ of the light at the geometric
-// normal, at most kMaxShadowSlope (θ = 84°; cos θ >= kMinShadowCos keeps the division finite).
-const float kMaxShadowSlope = 10.0;
-const float kMinShadowCos = 0.0995;
-
 // Whether p (geometric normal n_g, facing the light) is in shadow; see the file comment.
 bool InShadow(vec3 p, vec3 n_g) {
-  int v = ShadowViewOf(p);
+  int v = LightMapViewOf(p, params.light.xyz, params.num_shadow_views);
   ShadowView view = params.views[v];
   vec4 clip = TransformRows(view.clip_from_object, p);
-  vec2 ndc = clip.xy / clip.w;
-  float res = float(params.shadow_resolution);
-  vec2 texel = clamp(floor((ndc * 0.5 + 0.5) * res), vec2(0.0), vec2(res - 1.0));
-  vec2 centre = (texel + 0.5) / res * 2.0 - 1.0;
-  bool perspective = view.origin.w > 0.5;
-  vec3 origin = view.origin.xyz;
-  vec3 dir = view.forward.xyz;
-  float t_p;
-  float footprint;
-  if (perspective) {
-    dir = normalize(view.forward.xyz + centre.x * view.right.w * view.right.xyz +
-                    centre.y * view.up.w * view.up.xyz);
-    t_p = length(p - origin);
-    footprint = 2.0 * view.right.w / res * t_p;
-  } else {
-    origin += centre.x * view.right.w * view.right.xyz + centre.y * view.up.w * view.up.xyz;
-    t_p = dot(p - view.origin.xyz, view.forward.xyz);
-    footprint = 2.0 * view.right.w / res;
-  }
-  float t_plane = t_p;
-  float denom = dot(dir, n_g);
-  if (denom < 0.0) {
-    t_plane = min(dot(p - origin, n_g) / denom, t_p + params.shadow_bias.z * footprint);
-  }
-  float stored = texelFetch(shadow_map, ivec3(ivec2(texel), v), 0).r * view.forward.w;
-  float cos_g = max(-dot(dir, n_g), kMinShadowCos);
-  float tan_g = sqrt(max(1.0 - cos_g * cos_g, 0.0)) / cos_g;
-  float bias = params.shadow_bias.x +
-               params.shadow_bias.y * footprint * (1.0 + min(tan_g, kMaxShadowSlope));
-  return stored < t_plane - bias;
+  return LightMapShadowed(shadow_map, v, clip, view.origin, view.forward, view.right, view.up,
+                          params.shadow_resolution, p, n_g, params.shadow_bias.xyz);
 }
 
 struct Shade {

@@ -89,7 +89,7 @@ bool InMap(ivec2 t) {
 // ray of p's camera-map texel: stored < t_plane - bias, with the receiver-plane distance t_plane
 // of LightShadowed (a planar receiver cannot occlude itself at any slope) limited to bias.w pixel
 // footprints behind p, and bias = surface offset (float rounding, the CPU's ray offset) + bias.z
-// pixel footprints x (1 + min(tan θo, kMaxMaskSlope)) for concave neighbours met half a texel
+// pixel footprints x (1 + min(tan θo, kMaxLightMapSlope)) for concave neighbours met half a texel
 // beside p. Rays of map texels that see the background never occlude.
 bool CameraOccluded(vec3 p, vec3 n_g, vec3 p_cam, float footprint, float tan_v) {
   ivec2 t;
@@ -117,7 +117,7 @@ bool CameraOccluded(vec3 p, vec3 n_g, vec3 p_cam, float footprint, float tan_v) 
   float t_plane = t_p;
   float denom = dot(dir, n_g);
   if (denom < 0.0) t_plane = min(dot(p - origin, n_g) / denom, t_p + params.bias.w * footprint);
-  float bias = params.tests.w + params.bias.z * footprint * (1.0 + min(tan_v, kMaxMaskSlope));
+  float bias = params.tests.w + params.bias.z * footprint * (1.0 + min(tan_v, kMaxLightMapSlope));
   return m.x < t_plane - bias;
 }
 
