@@ -56,7 +56,7 @@ int RunFit(int argc, char** argv) {
               "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
   args.AddDouble("highlight-cone", &options.highlight_cone_deg,
                  "a lobe is fitted only where some sample lies within DEG of the mirror "
-                 "direction (default 10)");
+                 "direction (default 5)");
   args.AddDouble("loss-scale", &options.loss_scale,
                  "robust loss scale in noise standard deviations (default 3)");
   args.AddInt("max-iterations", &options.max_iterations, "LM steps per stage, 1..10000 (default 100)");

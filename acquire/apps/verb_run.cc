@@ -163,7 +163,7 @@ int RunRun(int argc, char** argv) {
               "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
   args.AddDouble("highlight-cone", &options.fit.highlight_cone_deg,
                  "a lobe is fitted only where some sample lies within DEG of the mirror "
-                 "direction (default 10)");
+                 "direction (default 5)");
   args.AddInt("max-iterations", &options.fit.max_iterations, "LM steps per stage (default 100)");
   args.AddFlag("overwrite", &options.overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;

@@ -2,7 +2,8 @@
 // the executable: lobe transfer must never cost holdout PSNR against the same fit without it,
 // and the lobe must beat the Lambert-only baseline. The rig is the one on which lobe transfer
 // without its evidence bound (engine/fit/lobe_transfer.h) fell to 19.8 dB against 33.8 dB
-// without transfer: wrong borrowed lobes made a few holdout images many times too bright. And the
+// without transfer (at the 10-degree highlight cone of the time): wrong borrowed lobes made a few
+// holdout images many times too bright. And the
 // in-model noise bound on an all-matte capture.
 #include <gtest/gtest.h>
 
@@ -22,8 +23,10 @@ namespace fs = std::filesystem;
 // from lobe transfer is real; 0.25 dB admits a changed donor choice somewhere without letting
 // a single wrong highlight through (those cost several dB on this capture).
 constexpr double kTransferMayCostDb = 0.25;
-// Measured: 33.8 dB (lobe, no transfer) against 24-25 dB (Lambert only) on this rig; the lobe
-// must keep most of that 9 dB.
+// Measured on this rig: 40.3 dB (the default fit: lobe + transfer) against 25.1 dB (Lambert
+// only); the lobe must keep at least a third of that 15 dB. (The lobes texels fit on their own,
+// without transfer, reach 28.1 dB at the default 5-degree highlight cone, 33.8 dB at 10 degrees:
+// the narrower cone leaves more texels to borrow a lobe measured near its peak.)
 constexpr double kMinLobeGainDb = 5.0;
 
 testing::CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
@@ -58,7 +61,8 @@ TEST(PipelineAccuracy, LobeTransferNeverCostsHoldoutPsnrAndTheLobeBeatsLambert) 
   std::printf("holdout PSNR: lobe + transfer %.2f dB, lobe without transfer %.2f dB, Lambert only "
               "%.2f dB (noise bound %.2f dB)\n", psnr[0], psnr[1], psnr[2], bound);
   EXPECT_GE(psnr[0], psnr[1] - kTransferMayCostDb);
-  EXPECT_GT(psnr[1], psnr[2] + kMinLobeGainDb);
+  EXPECT_GT(psnr[0], psnr[2] + kMinLobeGainDb);
+  EXPECT_GT(psnr[1], psnr[2]);  // own lobes alone still beat no lobes
   EXPECT_LT(psnr[0], bound);  // a PSNR above what the noise allows would mean a broken metric
 }
 
