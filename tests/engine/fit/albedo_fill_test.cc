@@ -47,7 +47,8 @@ TEST(AlbedoFill, AnUnseenTexelTakesTheMeanAlbedoOfItsSeenNeighbours) {
   FitStore store = StoreOf({Seen(a), Unseen(), Seen(b), Unseen(), Unseen(), Unseen(), Unseen(),
                           Unseen(), Seen(far)});
   std::vector<uint8_t> filled;
-  const AlbedoFillStats stats = FillUnseenAlbedo(LineAtlas(9), AlbedoFillOptions{}, &store, &filled);
+  const AlbedoFillStats stats =
+      FillUnseenAlbedo(LineAtlas(9), AlbedoFillOptions{}, &store, &filled);
   EXPECT_EQ(stats.unseen, 6u);
   EXPECT_EQ(stats.filled, 6u);
   const TexelFit t1 = store.Get(1);
