@@ -219,20 +219,28 @@ StatusOr<std::unique_ptr<ImageResampler>> ImageResampler::Create(const Capture& 
   return r;
 }
 
-Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageOutput* out) const {
-  const Capture& capture = *capture_;
-  const TexelAtlas& atlas = *atlas_;
+Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels) {
   if (image_index >= capture.images.size()) {
     return InvalidArgumentError("image index ", image_index, " out of range");
   }
   const CaptureImage& image = capture.images[image_index];
   const Camera& camera = capture.cameras[image.camera];
-  const std::string field = StrCat(capture.json_path.string(), ": images[", image_index, "].file");
   if (pixels.width != camera.width || pixels.height != camera.height || pixels.channels != 3) {
-    return InvalidArgumentError(field, ": ", image.file, " is ", pixels.width, "x", pixels.height,
-                                "x", pixels.channels, ", expected ", camera.width, "x",
-                                camera.height, " RGB");
+    return InvalidArgumentError(capture.json_path.string(), ": images[", image_index, "].file: ",
+                                image.file, " is ", pixels.width, "x", pixels.height, "x",
+                                pixels.channels, ", expected ", camera.width, "x", camera.height,
+                                " RGB");
   }
+  return OkStatus();
+}
+
+Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageOutput* out) const {
+  const Capture& capture = *capture_;
+  const TexelAtlas& atlas = *atlas_;
+  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels));
+  const CaptureImage& image = capture.images[image_index];
+  const Camera& camera = capture.cameras[image.camera];
+  const std::string field = StrCat(capture.json_path.string(), ": images[", image_index, "].file");
   if (scene_ == nullptr && image.camera != capture.normal_map->camera) {
     return InvalidArgumentError(field, ": seen by camera \"", camera.id,
                                 "\", not by the normal map's camera");

@@ -124,6 +124,11 @@ struct ImageOutput {
   uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
 };
 
+// The checks every resampling path makes of photograph `image_index` before it reads `pixels`:
+// an index within the capture's images, and an RGB image of its camera's size. InvalidArgument
+// naming the capture file and the image's field otherwise.
+Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels);
+
 class ImageResampler {
  public:
   // `scene` is the mesh's RayScene for mesh captures and nullptr for normal-map captures; the

@@ -506,17 +506,10 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
                             CameraMapView* map) {
   Impl& m = *impl_;
   const Capture& capture = *m.capture;
-  if (image_index >= capture.images.size()) {
-    return InvalidArgumentError("image index ", image_index, " out of range");
-  }
+  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels));
   const CaptureImage& image = capture.images[image_index];
   const Camera& camera = capture.cameras[image.camera];
   const std::string field = StrCat(capture.json_path.string(), ": images[", image_index, "].file");
-  if (pixels.width != camera.width || pixels.height != camera.height || pixels.channels != 3) {
-    return InvalidArgumentError(field, ": ", image.file, " is ", pixels.width, "x", pixels.height,
-                                "x", pixels.channels, ", expected ", camera.width, "x",
-                                camera.height, " RGB");
-  }
   gpu::VkContext& ctx = *m.ctx;
   m.stats = VulkanMaskStats{};
   const int w = camera.width, h = camera.height;
