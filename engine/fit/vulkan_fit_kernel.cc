@@ -128,7 +128,7 @@ namespace {
 
 // Binding numbers and types of lm_fit.comp's set 0.
 constexpr uint32_t kStorageBindings[] = {0, 1, 2, 4, 5, 6};
-constexpr uint32_t kTexelBindings[] = {3, 7};
+constexpr uint32_t kTexelBindings[] = {3};
 
 }  // namespace
 
@@ -238,7 +238,7 @@ void LmKernels::Write(const LmBindings& b) {
     writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     writes[i].pBufferInfo = &infos[i];
   }
-  const VkBufferView views[] = {b.records, b.weights};
+  const VkBufferView views[] = {b.records};
   for (size_t i = 0; i < std::size(kTexelBindings); ++i) {
     VkWriteDescriptorSet& w = writes[std::size(kStorageBindings) + i];
     w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;

@@ -1,8 +1,8 @@
 #pragma once
 // The Vulkan objects of the fitter's LM kernel (shaders/fit/lm_fit.comp) that the compute
 // foundation's all-storage-buffer ComputePipeline does not cover: the kernel reads its residuals
-// through two uniform texel buffers (why: lm_fit.comp's header), so it has its own descriptor set
-// layout (bindings 0-2 and 4-6 storage buffers, 3 and 7 uniform texel buffers), pipelines, and
+// through a uniform texel buffer (why: lm_fit.comp's header), so it has its own descriptor set
+// layout (bindings 0-2 and 4-6 storage buffers, 3 a uniform texel buffer), pipelines, and
 // texel buffers with views. Used by engine/fit/vulkan_fitter.cc only; includes Vulkan.
 #include <vulkan/vulkan.h>
 
@@ -59,8 +59,7 @@ uint64_t MaxTexelBufferElements(const gpu::VkContext& ctx);
 // What one dispatch of the kernel binds.
 struct LmBindings {
   gpu::BufferBinding settings, desc, queue, lanes, results, control;  // bindings 0, 1, 2, 4, 5, 6
-  VkBufferView records = VK_NULL_HANDLE;  // binding 3, RGBA32F (xx, yy, zz, y)
-  VkBufferView weights = VK_NULL_HANDLE;  // binding 7, R32F sqrt(w)
+  VkBufferView records = VK_NULL_HANDLE;  // binding 3, RGBA32F residual quads (fit_gpu.h)
 };
 
 // The kernel's descriptor set layout, pipeline layout, one descriptor set, and one pipeline per

@@ -4,12 +4,12 @@
 // Data layout (shaders/shared/fit_gpu.h has the word layouts):
 //   records  one slot per residual, each problem's residuals contiguous: the store is CSR by
 //            texel and a lane reads its problem's slots in order. Texel t of a batch owns
-//            3 x samples(t) slots (its problems' residuals never exceed that). On the device two
-//            uniform texel buffers, (xx, yy, zz, y) as RGBA32F and sqrt(w) as R32F (lm_fit.comp
-//            says why texel buffers); on the host five sections (xx, yy, zz, y, sqrt(w)) that
-//            back the prepared problems' ResidualViews, which FinishProblem reads (its
-//            Lambert-only fallback refits rho from them), so they live until the batch is
-//            finished, plus the interleaved RGBA copy for the upload.
+//            3 x samples(t) slots (its problems' residuals never exceed that). On the host five
+//            sections (xx, yy, zz, y, sqrt(w)) that back the prepared problems' ResidualViews,
+//            which FinishProblem reads (its Lambert-only fallback refits rho from them), so they
+//            live until the batch is finished. On the device one RGBA32F uniform texel buffer of
+//            residual quads (shared/fit_gpu.h; lm_fit.comp says why): texel t owns
+//            QuadBound(samples(t)) quads of 5 texels, enough for its problems' quads.
 //   desc     per problem: first record, channel blocks, stages, masks, loss scale, x0.
 //   queue    device problems sorted by residual count, largest first: lanes in lock-step
 //            (lavapipe runs 8 invocations as one SIMD subgroup) then take problems of similar
@@ -47,9 +47,12 @@ namespace sh = gpu::shared;
 // and two host batches of at most ~100 MB (prepared + solved problems, records).
 constexpr uint32_t kDefaultBatchProblems = 1u << 15;
 constexpr uint64_t kDefaultBatchResiduals = uint64_t{1} << 21;  // 40 MiB of records
-// Persistent lanes: a CPU device runs a few workgroups at a time (one per thread), so a few
-// thousand lanes keep it busy; a GPU needs tens of thousands in flight.
-constexpr uint32_t kSoftwareLanes = 4096;
+// Persistent lanes: a CPU device runs a few workgroups at a time (one per thread), so a
+// thousand lanes keep it busy, and fewer lanes than problems let every lane take several: a
+// lane's 8-wide subgroup runs until its slowest problem ends, which one problem per lane leaves
+// to chance (lavapipe, 1,024 samples per texel, batches of ~2,000 problems: 4,096 lanes 13.9k
+// fits/s, 1,024 lanes 16.3k; 64 samples unchanged). A GPU needs tens of thousands in flight.
+constexpr uint32_t kSoftwareLanes = 1024;
 constexpr uint32_t kGpuLanes = 65536;
 constexpr uint32_t kLocalSize = 64;
 // Loop steps kept back from the device's loop budget for loops a driver compiler might add
@@ -90,6 +93,15 @@ float BitsFloat(uint32_t bits) {
   return v;
 }
 
+// Device quads (four residuals each, shared/fit_gpu.h) of a problem of `residuals` residuals.
+uint64_t QuadsOf(uint64_t residuals) { return (residuals + 3) / 4; }
+
+// Quads that a texel's problems need at most: a problem of c residuals needs ceil(c / 4) <=
+// (c + 3) / 4, and the problems' c sum to at most 3 x samples.
+uint64_t QuadBound(uint64_t samples, int per_texel) {
+  return (3 * samples + 3 * uint64_t(per_texel)) / 4;
+}
+
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -98,11 +110,12 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 struct Batch {
   uint32_t begin = 0, end = 0;            // chunk texels [begin, end)
   std::vector<uint64_t> slot;             // first record slot of each texel (batch-local)
+  std::vector<uint64_t> quad;             // first device quad of each texel (batch-local)
   std::vector<PreparedProblem> problems;  // (end - begin) x ProblemsPerTexel
   std::vector<SolvedProblem> solved;      // filled for kRouteTrivial / kRouteCpu problems
   std::vector<uint8_t> route;
   std::vector<float> records;             // 5 sections of slot.back() floats (see the top)
-  std::vector<float> rgba;                // (xx, yy, zz, y) per slot, for the device
+  std::vector<float> rgba;                // the device's quads, 5 RGBA texels per quad
   std::vector<uint32_t> desc;
   std::vector<uint32_t> queue;
   std::vector<uint32_t> results;          // downloaded results (OUT_STRIDE words per problem)
@@ -137,6 +150,7 @@ class VulkanFitterImpl final : public VulkanFitter {
     int workers = 1;
     uint32_t max_problems = 0;     // per batch
     uint64_t max_records = 0;      // per batch
+    uint64_t max_texels = 0;       // device texels (5 per quad) per batch
     uint32_t max_device_residuals = 0;  // per problem
     uint32_t lane_cap = 0;
   };
@@ -158,7 +172,7 @@ class VulkanFitterImpl final : public VulkanFitter {
   Batch batches_[2];
   struct {
     gpu::Buffer settings, desc, queue, lanes, results, control;
-    internal::TexelBuffer records, weights;
+    internal::TexelBuffer records;
   } buffers_;
   VulkanFitStats stats_;
 };
@@ -167,16 +181,20 @@ std::vector<std::pair<uint32_t, uint32_t>> VulkanFitterImpl::CutBatches(
     const TexelSampleChunk& chunk, const Plan& plan) const {
   std::vector<std::pair<uint32_t, uint32_t>> out;
   uint32_t begin = 0;
-  uint64_t records = 0;
+  uint64_t records = 0, texels = 0;
   for (uint32_t t = 0; t < chunk.texel_count; ++t) {
     const uint64_t slots = 3 * chunk.SampleCount(t);
+    const uint64_t quad_texels =
+        REFLCAP_FIT_QUAD_TEXELS * QuadBound(chunk.SampleCount(t), plan.per_texel);
     const uint64_t problems = uint64_t(t - begin + 1) * plan.per_texel;
-    if (t > begin && (problems > plan.max_problems || records + slots > plan.max_records)) {
+    if (t > begin && (problems > plan.max_problems || records + slots > plan.max_records ||
+                      texels + quad_texels > plan.max_texels)) {
       out.emplace_back(begin, t);
       begin = t;
-      records = 0;
+      records = texels = 0;
     }
     records += slots;
+    texels += quad_texels;
   }
   if (chunk.texel_count > begin) out.emplace_back(begin, chunk.texel_count);
   return out;
@@ -194,12 +212,17 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
   b->slot.resize(texels + 1);
   b->slot[0] = 0;
   for (uint32_t t = 0; t < texels; ++t) b->slot[t + 1] = b->slot[t] + 3 * chunk.SampleCount(begin + t);
+  b->quad.resize(texels + 1);
+  b->quad[0] = 0;
+  for (uint32_t t = 0; t < texels; ++t) {
+    b->quad[t + 1] = b->quad[t] + QuadBound(chunk.SampleCount(begin + t), per_texel);
+  }
   b->problems.resize(problems);
   b->solved.resize(problems);
   b->route.assign(problems, kRouteTrivial);
   const uint64_t section = std::max<uint64_t>(1, b->slot[texels]);
   b->records.resize(section * REFLCAP_FIT_RECORD_FLOATS);
-  b->rgba.resize(section * 4);
+  b->rgba.resize(std::max<uint64_t>(1, b->quad[texels]) * REFLCAP_FIT_QUAD_TEXELS * 4);
   float* const section_of[REFLCAP_FIT_RECORD_FLOATS] = {
       b->records.data(), b->records.data() + section, b->records.data() + 2 * section,
       b->records.data() + 3 * section, b->records.data() + 4 * section};
@@ -216,7 +239,10 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
           PrepareTexel(options, plan.layout, chunk.SamplesOf(texel), chunk.SampleCount(texel),
                        int(texel), &arena, &cursor, q);
           // A texel larger than a whole batch (alone in its batch, CutBatches) stays on the CPU.
-          const bool fits_a_batch = b->slot[t + 1] - b->slot[t] <= plan.max_records;
+          const bool fits_a_batch =
+              b->slot[t + 1] - b->slot[t] <= plan.max_records &&
+              REFLCAP_FIT_QUAD_TEXELS * (b->quad[t + 1] - b->quad[t]) <= plan.max_texels;
+          uint64_t quad = b->quad[t];  // the texel's next free device quad
           for (int p = 0; p < per_texel; ++p) {
             const size_t i = size_t(t) * per_texel + p;
             PreparedProblem& problem = q[p];
@@ -243,15 +269,19 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
               b->solved[i] = SolveScalar<float>(problem, plan.settings, options.loss);
               b->route[i] = kRouteCpu;
             } else {
-              float* rgba = &b->rgba[first * 4];
-              for (int r = 0; r < count; ++r, rgba += 4) {
-                rgba[0] = view.xx[r];
-                rgba[1] = view.yy[r];
-                rgba[2] = view.zz[r];
-                rgba[3] = view.y[r];
+              const uint64_t quads = QuadsOf(count);
+              float* texel = &b->rgba[quad * REFLCAP_FIT_QUAD_TEXELS * 4];
+              for (uint64_t q = 0; q < quads; ++q) {
+                for (int k = 0; k < REFLCAP_FIT_QUAD_TEXELS; ++k, texel += 4) {
+                  for (int c = 0; c < 4; ++c) {
+                    const int r = int(4 * q) + c;
+                    texel[c] = r < count ? from[k][r] : 0.0f;  // padding: no weight
+                  }
+                }
               }
               uint32_t* d = &b->desc[i * desc_stride];
-              d[sh::kFitDescBegin] = uint32_t(first);
+              d[sh::kFitDescBegin] = uint32_t(quad * REFLCAP_FIT_QUAD_TEXELS);
+              quad += quads;
               d[sh::kFitDescBlock1] = uint32_t(view.begin[1]);
               d[sh::kFitDescBlock2] = uint32_t(view.begin[2]);
               d[sh::kFitDescCount] = uint32_t(count);
@@ -301,7 +331,7 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   const uint64_t problems = b->problems.size();
   const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
   const uint64_t queue_bytes = b->queue.size() * 4;
-  const uint64_t slots = std::max<uint64_t>(1, b->slot.back());
+  const uint64_t texels = std::max<uint64_t>(1, b->quad.back()) * REFLCAP_FIT_QUAD_TEXELS;
   const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
   const uint32_t lanes = std::min<uint32_t>(uint32_t(b->queue.size()), plan.lane_cap);
   const uint64_t lane_bytes = uint64_t(lanes) * REFLCAP_FIT_LANE_STRIDE(P) * 4;
@@ -318,15 +348,12 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
-  if (buffers_.records.elements() < slots) {
+  if (buffers_.records.elements() < texels) {
     // Room to grow by a quarter, as Ensure.
-    const uint64_t want = std::min<uint64_t>(slots + slots / 4, plan.max_records);
+    const uint64_t want = std::min<uint64_t>(texels + texels / 4, plan.max_texels);
     REFLCAP_ASSIGN_OR_RETURN(buffers_.records, internal::TexelBuffer::Create(
-                                                   *ctx_, std::max(want, slots),
+                                                   *ctx_, std::max(want, texels),
                                                    VK_FORMAT_R32G32B32A32_SFLOAT, 16));
-    REFLCAP_ASSIGN_OR_RETURN(buffers_.weights, internal::TexelBuffer::Create(
-                                                   *ctx_, std::max(want, slots),
-                                                   VK_FORMAT_R32_SFLOAT, 4));
   }
 
   sh::FitGpuSettings settings{};
@@ -346,17 +373,15 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, &settings, sizeof settings, buffers_.settings));
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->desc.data(), desc_bytes, buffers_.desc));
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->queue.data(), queue_bytes, buffers_.queue));
-  REFLCAP_RETURN_IF_ERROR(buffers_.records.Upload(*ctx_, cmd_, b->rgba.data(), slots * 16));
-  REFLCAP_RETURN_IF_ERROR(
-      buffers_.weights.Upload(*ctx_, cmd_, b->records.data() + 4 * slots, slots * 4));  // sqrt(w)
+  REFLCAP_RETURN_IF_ERROR(buffers_.records.Upload(*ctx_, cmd_, b->rgba.data(), texels * 16));
 
-  // Ticks per dispatch: the loop budget (T (R + 2) + 1 steps, see lm_fit.comp) and the submit
-  // work cap.
+  // Ticks per dispatch: the loop budget (T (Q + 2) + 1 steps for Q quads, see lm_fit.comp) and
+  // the submit work cap.
   const uint64_t r = std::max<uint32_t>(1, b->max_residuals);
   uint64_t ticks = std::max<uint64_t>(1, kMaxResidualEvaluationsPerSubmit / (uint64_t(lanes) * r));
   const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(*ctx_);
   if (budget != gpu::kNoLoopIterationLimit) {
-    ticks = std::min<uint64_t>(ticks, (budget - 1 - kLoopReserve) / (b->max_residuals + 2));
+    ticks = std::min<uint64_t>(ticks, (budget - 1 - kLoopReserve) / (QuadsOf(b->max_residuals) + 2));
   }
   if (options_.max_ticks_per_dispatch > 0) {
     ticks = std::min<uint64_t>(ticks, options_.max_ticks_per_dispatch);
@@ -379,7 +404,6 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
   bindings.control = gpu::Bind(buffers_.control, 0, sizeof(sh::FitGpuControl));
   bindings.records = buffers_.records.view();
-  bindings.weights = buffers_.weights.view();
   kernels_->Write(bindings);
 
   const sh::FitGpuPush push{uint32_t(b->queue.size()), lanes, uint32_t(ticks), 0};
@@ -468,13 +492,13 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
       options_.max_batch_problems > 0 ? options_.max_batch_problems : kDefaultBatchProblems,
       range / widest);
   plan.max_problems = std::max<uint32_t>(plan.max_problems, plan.per_texel);
-  plan.max_records = std::min<uint64_t>(
-      options_.max_batch_residuals > 0 ? options_.max_batch_residuals : kDefaultBatchResiduals,
-      internal::MaxTexelBufferElements(*ctx_));
+  plan.max_records =
+      options_.max_batch_residuals > 0 ? options_.max_batch_residuals : kDefaultBatchResiduals;
+  plan.max_texels = internal::MaxTexelBufferElements(*ctx_);
   const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(info);
   plan.max_device_residuals = budget == gpu::kNoLoopIterationLimit
                                   ? uint32_t(std::min<uint64_t>(plan.max_records, 0x7FFFFFFF))
-                                  : budget - 3 - kLoopReserve;  // one tick: R + 2 steps, + 1
+                                  : 4 * (budget - 3 - kLoopReserve);  // one tick: Q + 2 steps, + 1
   if (options_.max_device_residuals > 0) {
     plan.max_device_residuals = std::min(plan.max_device_residuals, options_.max_device_residuals);
   }

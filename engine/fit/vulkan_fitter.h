@@ -18,9 +18,9 @@
 // On the device, each invocation is a persistent lane that takes problems from a queue (sorted
 // by residual count, so lanes that run in lock-step see similar sample counts), runs them to the
 // end and takes the next. A dispatch runs at most `ticks` LM steps per lane, each one evaluation
-// of the normal equations: ticks = (loop budget - 1 - reserve) / (max residuals + 2) on
+// of the normal equations: ticks = (loop budget - 1 - reserve) / (max quads + 2) on
 // lavapipe, whose budget of ~65,000 loop steps per invocation would otherwise cut long solves
-// off silently, and at most kMaxResidualEvaluationsPerSubmit residual evaluations per submit
+// off silently (the sample loop takes four residuals, a quad, per pass), and at most kMaxResidualEvaluationsPerSubmit residual evaluations per submit
 // everywhere, so no submission runs long. The LM state of unfinished problems stays in device
 // buffers between dispatches; the host dispatches until no lane holds a problem.
 //
@@ -47,11 +47,11 @@ struct VulkanFitterOptions {
   // maxStorageBufferRange). Small values make tests exercise many batches.
   uint32_t max_batch_problems = 0;
   uint64_t max_batch_residuals = 0;
-  // Persistent lanes per dispatch (0 = automatic: 4,096 on a CPU device, 65,536 on a GPU; never
+  // Persistent lanes per dispatch (0 = automatic: 1,024 on a CPU device, 65,536 on a GPU; never
   // more than the batch's problems).
   uint32_t lanes = 0;
   // Problems with more residuals than this are solved on the CPU (0 = as many as one
-  // invocation's loop budget allows: ~64,900 on lavapipe, unlimited elsewhere). Tests lower it
+  // invocation's loop budget allows: ~259,800 on lavapipe, unlimited elsewhere). Tests lower it
   // to exercise the CPU route.
   uint32_t max_device_residuals = 0;
   // Upper bound on LM ticks per dispatch (0 = only the loop budget and the per-submit work cap

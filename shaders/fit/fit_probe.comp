@@ -26,12 +26,23 @@ void main() {
   if (i >= count) return;
   FitProbeInput in_ = inputs[i];
   FitProbeOutput out_;
-  out_.exp_value = FitExp(in_.exp_arg);
-  out_.log_value = FitLog(in_.log_arg);
-  float dvdb, dvdn;
-  out_.lobe_value = FitLobeValueAndSlopes(in_.base, in_.n, dvdb, dvdn);
-  out_.dvalue_dbase = dvdb;
-  out_.dvalue_dn = dvdn;
+  // The element goes in component i % 4 of the vec4 twins (the others hold harmless values),
+  // so every component's arithmetic is checked.
+  int c = int(i % 4u);
+  vec4 exp_arg = vec4(0.0);
+  vec4 log_arg = vec4(1.0);
+  vec4 base = vec4(0.5);
+  vec4 n = vec4(1.0);
+  exp_arg[c] = in_.exp_arg;
+  log_arg[c] = in_.log_arg;
+  base[c] = in_.base;
+  n[c] = in_.n;
+  out_.exp_value = FitExp(exp_arg)[c];
+  out_.log_value = FitLog(log_arg)[c];
+  vec4 dvdb, dvdn;
+  out_.lobe_value = FitLobeValueAndSlopes(base, n, dvdb, dvdn)[c];
+  out_.dvalue_dbase = dvdb[c];
+  out_.dvalue_dn = dvdn[c];
   out_.reserved0 = 0.0;
   out_.reserved1 = 0.0;
   out_.reserved2 = 0.0;

@@ -5,12 +5,12 @@
 //
 // Bindings (set 0):
 //   0 FitGpuSettings (read)          bounds and stage settings (shared/fit_gpu.h)
-//   1 uint desc[]    (read)          per problem: REFLCAP_FIT_DESC_STRIDE(FIT_P) words
+//   1 uvec4 desc[]   (read)          per problem: REFLCAP_FIT_DESC_STRIDE(FIT_P) words
 //   2 uint queue[]   (read)          problem indices in the order lanes take them
-//   3 samplerBuffer  (RGBA32F texel) residual r's (xx, yy, zz, y) at texel r
-//   7 samplerBuffer  (R32F texel)    residual r's sqrt(w) at texel r
+//   3 samplerBuffer  (RGBA32F texel) residual quads (shared/fit_gpu.h): per four residuals, five
+//                                    texels xx, yy, zz, y, sqrt(w) of the four
 //   4 uint lanes[]   (read/write)    per lane: REFLCAP_FIT_LANE_STRIDE(FIT_P) words of LM state
-//   5 uint results[] (write)         per problem: REFLCAP_FIT_OUT_STRIDE(FIT_P) words
+//   5 uvec4 results[] (write)        per problem: REFLCAP_FIT_OUT_STRIDE(FIT_P) words
 //   6 FitGpuControl  (atomics)       queue head and the count of lanes still busy
 // Push constants:  FitGpuPush {problem_count, lane_count, ticks}.
 // Specialization:  constant_id 0 = local_size_x (default 64); 1 = loss (kFitLoss*).
@@ -21,11 +21,17 @@
 //                  batched_fitter.cc's ProposeLanes builds it, batched_kernel.cc's Kernel (normal
 //                  equations), batched_fitter.cc's stage handling (next_stage / finish).
 //
-// Why texel buffers for the residuals: each lane reads its own problem's residuals, so the 8
+// Why a texel buffer for the residuals: each lane reads its own problem's residuals, so the 8
 // lanes that lavapipe runs in lock-step read 8 unrelated addresses. lavapipe (Mesa 22.3) loads
 // storage buffers lane by lane in a branchy scalar loop, one per component, which cost half of
 // the kernel's time here; texel fetches go through its texture path, one vector gather per
-// channel. On GPUs both are ordinary cached loads.
+// channel (a call into a fetch function that spills every vector register: five fetches per
+// four residuals, where one RGBA and one R fetch per residual took eight). On GPUs both are
+// ordinary cached loads. Why four residuals per pass of the sample loop: fit_model.glsl's header.
+// Descriptors and results move as uvec4s for the same reason: lavapipe runs a scalar loop over
+// the 8 lanes for every storage-buffer access, and a uvec4 access moves four words per loop
+// (and every access runs each tick, whether a lane takes a problem or not: lavapipe executes
+// both sides of every branch under a mask). 5 % of the kernel's time on lavapipe.
 //
 // Persistent lanes: each invocation is a lane that takes problems from the shared queue
 // (atomicAdd on control.next), runs them to the end, writes the result, and takes the next, so a
@@ -37,7 +43,8 @@
 // one evaluation of the normal equations (the sample loop). The loops that run are the tick loop
 // and the sample loop; every loop over parameters is [[unroll]]ed, so on lavapipe, whose loop
 // budget per invocation (engine/gpu/device_info.h) counts every pass through a loop header, a
-// dispatch of T ticks over problems of at most R residuals takes at most T (R + 2) + 1 steps —
+// dispatch of T ticks over problems of at most Q residual quads (Q = ceil(R / 4) for R residuals)
+// takes at most T (Q + 2) + 1 steps —
 // the host picks T from that (engine/fit/vulkan_fitter.cc). lm.h's Propose loops until it has a
 // proposal; here each pass is one tick, so its retries (failed factorisation, projected step not
 // predicted to descend) resume in the next tick with identical state and arithmetic.
@@ -50,18 +57,19 @@ layout(local_size_x = 64, local_size_x_id = 0) in;
 layout(constant_id = 1) const int kLoss = 0;
 
 layout(std430, set = 0, binding = 0) readonly buffer Settings { FitGpuSettings settings; };
-layout(std430, set = 0, binding = 1) readonly buffer Descriptors { uint desc[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Descriptors { uvec4 desc[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Queue { uint queue[]; };
 layout(set = 0, binding = 3) uniform samplerBuffer records;
-layout(set = 0, binding = 7) uniform samplerBuffer weights;
 layout(std430, set = 0, binding = 4) buffer Lanes { uint lanes[]; };
-layout(std430, set = 0, binding = 5) writeonly buffer Results { uint results[]; };
+layout(std430, set = 0, binding = 5) writeonly buffer Results { uvec4 results[]; };
 layout(std430, set = 0, binding = 6) buffer Control { FitGpuControl control; };
 layout(push_constant) uniform Push { FitGpuPush push; };
 
 #define DESC_STRIDE REFLCAP_FIT_DESC_STRIDE(FIT_P)
 #define LANE_STRIDE REFLCAP_FIT_LANE_STRIDE(FIT_P)
 #define OUT_STRIDE REFLCAP_FIT_OUT_STRIDE(FIT_P)
+#define DESC_VEC4S (DESC_STRIDE / 4)
+#define OUT_VEC4S (OUT_STRIDE / 4)
 
 // ---- The lane's state (lm.h LmState, batched_fitter.cc LaneState) ---------------------------
 uint s_problem;
@@ -165,16 +173,26 @@ void SaveLane(uint lane) {
   }
 }
 
-void LoadDescriptor() {
-  uint o = s_problem * uint(DESC_STRIDE);
-  d_begin = desc[o + kFitDescBegin];
-  d_block1 = desc[o + kFitDescBlock1];
-  d_block2 = desc[o + kFitDescBlock2];
-  d_count = desc[o + kFitDescCount];
-  d_stages = desc[o + kFitDescStages];
-  d_mask0 = desc[o + kFitDescMask0];
-  d_mask1 = desc[o + kFitDescMask1];
-  d_loss_scale = uintBitsToFloat(desc[o + kFitDescLossScale]);
+// The problem's descriptor: the header into d_*, the start parameters into x0.
+void LoadDescriptor(out float x0[FIT_P]) {
+  uint w[DESC_STRIDE];
+  uint o = s_problem * uint(DESC_VEC4S);
+  [[unroll]] for (int k = 0; k < DESC_VEC4S; ++k) {
+    uvec4 v = desc[o + k];
+    w[4 * k] = v.x;
+    w[4 * k + 1] = v.y;
+    w[4 * k + 2] = v.z;
+    w[4 * k + 3] = v.w;
+  }
+  d_begin = w[kFitDescBegin];
+  d_block1 = w[kFitDescBlock1];
+  d_block2 = w[kFitDescBlock2];
+  d_count = w[kFitDescCount];
+  d_stages = w[kFitDescStages];
+  d_mask0 = w[kFitDescMask0];
+  d_mask1 = w[kFitDescMask1];
+  d_loss_scale = uintBitsToFloat(w[kFitDescLossScale]);
+  [[unroll]] for (int j = 0; j < FIT_P; ++j) x0[j] = uintBitsToFloat(w[kFitDescX0 + j]);
 }
 
 // ---- lm.h ------------------------------------------------------------------------------------
@@ -410,7 +428,10 @@ void LmAdvance() {
   s_phase = kFitPhasePropose;
 }
 
-// batched_kernel.cc Kernel: J^T W J, J^T W r and the cost of all residuals at s_x_new.
+// batched_kernel.cc Kernel: J^T W J, J^T W r and the cost of all residuals at s_x_new, four
+// residuals per pass (a quad: REFLCAP_FIT_QUAD_TEXELS texels). The host pads a problem's last
+// quad with sqrt(w) = 0 and zero geometry, which adds exactly 0 to every sum: the residual and
+// every J_sw are 0 and every loss has rho(0) = 0 (the model is finite at base 0: no lobe).
 void EvaluateNormalEquations() {
   [[unroll]] for (int i = 0; i < FIT_PACKED; ++i) n_a[i] = 0.0;
   [[unroll]] for (int j = 0; j < FIT_P; ++j) n_g[j] = 0.0;
@@ -419,31 +440,34 @@ void EvaluateNormalEquations() {
   [[unroll]] for (int j = 0; j < FIT_P; ++j) x[j] = s_x_new[j];
   float delta = d_loss_scale;
   int o = int(d_begin);
-  for (uint i = 0u; i < d_count; ++i, ++o) {
-    vec4 r = texelFetch(records, o);
-    float xx = r.x;
-    float yy = r.y;
-    float zz = r.z;
-    float y = r.w;
-    float sw = texelFetch(weights, o).x;
+  uint quads = (d_count + 3u) / 4u;
+  for (uint q = 0u; q < quads; ++q, o += REFLCAP_FIT_QUAD_TEXELS) {
+    vec4 xx = texelFetch(records, o);
+    vec4 yy = texelFetch(records, o + 1);
+    vec4 zz = texelFetch(records, o + 2);
+    vec4 y = texelFetch(records, o + 3);
+    vec4 sw = texelFetch(records, o + 4);
 #if FIT_MODEL == 2
-    int channel = i >= d_block2 ? 2 : (i >= d_block1 ? 1 : 0);
+    uvec4 i = uvec4(4u * q) + uvec4(0u, 1u, 2u, 3u);
+    ivec4 channel = ivec4(greaterThanEqual(i, uvec4(d_block1))) +
+                    ivec4(greaterThanEqual(i, uvec4(d_block2)));
 #else
-    int channel = 0;
+    ivec4 channel = ivec4(0);
 #endif
-    float grad[FIT_P];
-    float f = FitEvalModel(x, xx, yy, zz, channel, grad);
-    float res = sw * (f - y);
-    float rho, rho1;
+    vec4 grad[FIT_P];
+    vec4 f = FitEvalModel(x, xx, yy, zz, channel, grad);
+    vec4 res = sw * (f - y);
+    vec4 rho, rho1;
     FitRobustLoss(kLoss, res * res, delta, rho, rho1);
-    cost += 0.5 * rho;
-    float j_sw[FIT_P];
+    cost += 0.5 * ((rho.x + rho.y) + (rho.z + rho.w));
+    vec4 j_sw[FIT_P];
     [[unroll]] for (int j = 0; j < FIT_P; ++j) j_sw[j] = sw * grad[j];
+    vec4 rho1_res = rho1 * res;
     [[unroll]] for (int p = 0; p < FIT_P; ++p) {
-      n_g[p] += rho1 * res * j_sw[p];
-      float wp = rho1 * j_sw[p];
-      [[unroll]] for (int q = 0; q < FIT_P; ++q) {
-        if (q <= p) n_a[PackedIndex(p, q)] += wp * j_sw[q];
+      n_g[p] += dot(rho1_res, j_sw[p]);
+      vec4 wp = rho1 * j_sw[p];
+      [[unroll]] for (int r = 0; r < FIT_P; ++r) {
+        if (r <= p) n_a[PackedIndex(p, r)] += dot(wp, j_sw[r]);
       }
     }
   }
@@ -460,9 +484,7 @@ bool FetchProblem() {
     return false;
   }
   s_problem = queue[index];
-  LoadDescriptor();
-  uint o = s_problem * uint(DESC_STRIDE) + uint(kFitDescX0);
-  [[unroll]] for (int j = 0; j < FIT_P; ++j) s_x[j] = uintBitsToFloat(desc[o + j]);
+  LoadDescriptor(s_x);
   // The scalar path starts every problem with zero normal equations at x (a stage that ends
   // before its first evaluation keeps them).
   [[unroll]] for (int i = 0; i < FIT_PACKED; ++i) s_a[i] = 0.0;
@@ -479,14 +501,17 @@ bool FetchProblem() {
 }
 
 void WriteResult() {
-  uint o = s_problem * uint(OUT_STRIDE);
-  results[o + kFitOutStatus] = s_status;
-  results[o + kFitOutFreeMask] = s_free;
-  results[o + kFitOutIterations] = uint(s_total);
-  results[o + kFitOutCost] = floatBitsToUint(s_at_cost);
-  [[unroll]] for (int j = 0; j < FIT_P; ++j) results[o + kFitOutX + j] = floatBitsToUint(s_x[j]);
-  [[unroll]] for (int i = 0; i < FIT_PACKED; ++i) {
-    results[o + kFitOutX + FIT_P + i] = floatBitsToUint(s_a[i]);
+  uint w[OUT_STRIDE];
+  [[unroll]] for (int k = 0; k < OUT_STRIDE; ++k) w[k] = 0u;  // padding
+  w[kFitOutStatus] = s_status;
+  w[kFitOutFreeMask] = s_free;
+  w[kFitOutIterations] = uint(s_total);
+  w[kFitOutCost] = floatBitsToUint(s_at_cost);
+  [[unroll]] for (int j = 0; j < FIT_P; ++j) w[kFitOutX + j] = floatBitsToUint(s_x[j]);
+  [[unroll]] for (int i = 0; i < FIT_PACKED; ++i) w[kFitOutX + FIT_P + i] = floatBitsToUint(s_a[i]);
+  uint o = s_problem * uint(OUT_VEC4S);
+  [[unroll]] for (int k = 0; k < OUT_VEC4S; ++k) {
+    results[o + k] = uvec4(w[4 * k], w[4 * k + 1], w[4 * k + 2], w[4 * k + 3]);
   }
 }
 
@@ -508,7 +533,8 @@ void main() {
   LoadLane(lane);
   bool busy = s_problem != kFitNoProblem;
   if (busy) {
-    LoadDescriptor();
+    float x0[FIT_P];  // unused: a resumed problem's x is in its lane state
+    LoadDescriptor(x0);
   } else {
     busy = FetchProblem();
   }

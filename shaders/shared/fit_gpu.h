@@ -16,17 +16,24 @@
 #include "interop.h"
 
 // ---- Word strides (P = parameters of the layout) ---------------------------------------------
-// Residuals (bindings 3 and 7, uniform texel buffers): residual slot r of the batch is texel r
-// of an RGBA32F buffer holding (xx, yy, zz, y) and texel r of an R32F buffer holding sqrt(w),
-// as ResidualView holds them (normalised units, problem.h).
+// Residuals: the five floats of a residual as ResidualView holds them (normalised units,
+// problem.h): xx, yy, zz, y, sqrt(w).
 #define REFLCAP_FIT_RECORD_FLOATS 5
-// Problem descriptor (binding 1, uint[]): kFitDesc* header words, then x0[P] (float bits).
-#define REFLCAP_FIT_DESC_STRIDE(p) (8 + (p))
+// On the device (binding 3, an RGBA32F uniform texel buffer) a problem's residuals are quads:
+// residuals 4q .. 4q + 3 are the REFLCAP_FIT_QUAD_TEXELS texels from the problem's first texel
+// + 5q on, one per float of the record (xx of the four, then yy, zz, y, sqrt(w)); the last
+// quad is padded with zeros (sqrt(w) = 0: no weight). lm_fit.comp says why.
+#define REFLCAP_FIT_QUAD_TEXELS REFLCAP_FIT_RECORD_FLOATS
+// Descriptors and results are read and written as uvec4s (lm_fit.comp says why), so their
+// strides are whole uvec4s; the padding words are unused.
+#define REFLCAP_FIT_ROUND_UP4(n) (((n) + 3) / 4 * 4)
+// Problem descriptor (binding 1): kFitDesc* header words, then x0[P] (float bits).
+#define REFLCAP_FIT_DESC_STRIDE(p) REFLCAP_FIT_ROUND_UP4(8 + (p))
 // Lane state (binding 4, uint[]): kFitLane* header words, then x, x_new, jacobi, 1 / jacobi and
 // J^T r at x (P floats each), then J^T J at x (packed lower triangle, P (P + 1) / 2 floats).
 #define REFLCAP_FIT_LANE_STRIDE(p) (16 + 5 * (p) + (p) * ((p) + 1) / 2)
-// Result (binding 5, uint[]): kFitOut* header words, then x[P], then J^T J at x (packed).
-#define REFLCAP_FIT_OUT_STRIDE(p) (4 + (p) + (p) * ((p) + 1) / 2)
+// Result (binding 5): kFitOut* header words, then x[P], then J^T J at x (packed).
+#define REFLCAP_FIT_OUT_STRIDE(p) REFLCAP_FIT_ROUND_UP4(4 + (p) + (p) * ((p) + 1) / 2)
 
 REFLCAP_SHARED_BEGIN
 
@@ -34,7 +41,7 @@ REFLCAP_SHARED_BEGIN
 REFLCAP_CONST(uint, kFitNoProblem, 0xFFFFFFFFu);
 
 // Descriptor header words.
-REFLCAP_CONST(int, kFitDescBegin, 0);      // first residual slot of the problem (batch index)
+REFLCAP_CONST(int, kFitDescBegin, 0);      // first texel of the problem's first quad
 REFLCAP_CONST(int, kFitDescBlock1, 1);     // residuals of channel block 0 (= start of block 1)
 REFLCAP_CONST(int, kFitDescBlock2, 2);     // start of channel block 2 (shared model), relative
 REFLCAP_CONST(int, kFitDescCount, 3);      // residuals of the problem

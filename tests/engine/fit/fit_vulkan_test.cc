@@ -277,15 +277,16 @@ TEST_P(FitBackendTest, HardCaseSuiteAgreesWithTheCpuPath) {
 
 // The truncated-solve catcher. lavapipe gives one invocation ~65,000 loop steps in all
 // (engine/gpu/device_info.h), and cuts every loop off silently beyond them. These texels have
-// 3,072 samples per channel and, from the fixed start, need ~30 LM steps: a solve in one
-// invocation would need samples x evaluations steps (asserted > 65,535 below), so a kernel that
-// did not split its solve across dispatches would stop early — wrong parameters, or a
-// different status — and this comparison with the CPU would fail.
+// 12,288 samples per channel and, from the fixed start, need ~30 LM steps: a solve in one
+// invocation would need quads x evaluations steps (the sample loop takes four samples per pass;
+// asserted > 65,535 below), so a kernel that did not split its solve across dispatches would
+// stop early — wrong parameters, or a different status — and this comparison with the CPU would
+// fail.
 TEST_P(FitBackendTest, LongSolveOverManySamplesMatchesTheCpuPath) {
   brdf::BrdfParams truth = SynthMaterialParams(2);  // sharp highlight, n = 250
   SyntheticSampleOptions so;
-  so.samples_per_texel = 3072;
-  so.near_mirror_samples = 360;
+  so.samples_per_texel = 12288;
+  so.near_mirror_samples = 1440;
   so.seed = 73;
   const TexelSampleChunk chunk = MakeSyntheticChunk({truth, SynthMaterialParams(5)}, so);
   FitOptions options;
@@ -295,10 +296,11 @@ TEST_P(FitBackendTest, LongSolveOverManySamplesMatchesTheCpuPath) {
   const auto fits = Fit(chunk, options);
   ASSERT_EQ(reference[0].status, FitStatus::kConverged);
   ASSERT_EQ(reference[1].status, FitStatus::kConverged);
-  const uint64_t steps_in_one_invocation = uint64_t(reference[0].samples) * reference[0].iterations;
-  std::printf("  %s: %d samples x %d LM steps = %llu sample evaluations per channel\n",
-              BackendName(GetParam()), reference[0].samples, reference[0].iterations,
-              static_cast<unsigned long long>(steps_in_one_invocation));
+  const uint64_t quads = (uint64_t(reference[0].samples) + 3) / 4;
+  const uint64_t steps_in_one_invocation = quads * reference[0].iterations;
+  std::printf("  %s: %d samples (%llu quads) x %d LM steps = %llu sample-loop passes per channel\n",
+              BackendName(GetParam()), reference[0].samples, static_cast<unsigned long long>(quads),
+              reference[0].iterations, static_cast<unsigned long long>(steps_in_one_invocation));
   EXPECT_GT(steps_in_one_invocation, uint64_t{gpu::kLavapipeLoopCounter});
   const Agreement a = Compare(reference, fits);
   EXPECT_EQ(a.same_status, a.texels) << a.ToString();
@@ -314,8 +316,9 @@ TEST_P(FitBackendTest, LongSolveOverManySamplesMatchesTheCpuPath) {
     EXPECT_EQ(stats.gpu_problems, 6u);
     EXPECT_EQ(stats.cpu_problems, 0u);
     if (stats.loop_budget != gpu::kNoLoopIterationLimit) {
-      // Each dispatch stays within the budget and the solve took several.
-      EXPECT_LE(uint64_t(stats.min_ticks_per_dispatch) * (stats.max_residuals + 2) + 1,
+      // Each dispatch stays within the budget (T (Q + 2) + 1 steps, lm_fit.comp) and the solve
+      // took several.
+      EXPECT_LE(uint64_t(stats.min_ticks_per_dispatch) * ((stats.max_residuals + 3) / 4 + 2) + 1,
                 stats.loop_budget);
       EXPECT_GT(stats.dispatches, 1u);
     }
