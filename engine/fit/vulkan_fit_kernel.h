@@ -40,6 +40,9 @@ class TexelBuffer {
 
   uint64_t elements() const { return elements_; }
   VkBufferView view() const { return view_; }
+  // The buffer's memory mapped for the host (write there, then no Upload is needed), or null
+  // when the memory is not host-visible and coherent.
+  void* mapped() const { return mapped_; }
 
  private:
   void Release();

@@ -9,7 +9,8 @@
 //            which FinishProblem reads (its Lambert-only fallback refits rho from them), so they
 //            live until the batch is finished. On the device one RGBA32F uniform texel buffer of
 //            residual quads (shared/fit_gpu.h; lm_fit.comp says why): texel t owns
-//            QuadBound(samples(t)) quads of 5 texels, enough for its problems' quads.
+//            QuadBound(samples(t)) quads of 5 texels, enough for its problems' quads (none
+//            for a texel too large for a batch: its problems are solved on the CPU).
 //   desc     per problem: first record, channel blocks, stages, masks, loss scale, x0.
 //   queue    device problems sorted by residual count, largest first: lanes in lock-step
 //            (lavapipe runs 8 invocations as one SIMD subgroup) then take problems of similar
@@ -115,7 +116,9 @@ struct Batch {
   std::vector<SolvedProblem> solved;      // filled for kRouteTrivial / kRouteCpu problems
   std::vector<uint8_t> route;
   std::vector<float> records;             // 5 sections of slot.back() floats (see the top)
-  std::vector<float> rgba;                // the device's quads, 5 RGBA texels per quad
+  std::vector<float> rgba;                // the device's quads when device_records is not mapped
+  internal::TexelBuffer* device_records = nullptr;  // the batch's device quads
+  float* quads = nullptr;                 // where Prepare writes them: device_records' memory, or rgba
   std::vector<uint32_t> desc;
   std::vector<uint32_t> queue;
   std::vector<uint32_t> results;          // downloaded results (OUT_STRIDE words per problem)
@@ -153,6 +156,16 @@ class VulkanFitterImpl final : public VulkanFitter {
     uint64_t max_texels = 0;       // device texels (5 per quad) per batch
     uint32_t max_device_residuals = 0;  // per problem
     uint32_t lane_cap = 0;
+
+    // A texel of `samples` samples fits a batch (else it is alone in its batch and its problems
+    // are solved on the CPU), and the device quads reserved for it (0 when it does not fit).
+    bool FitsABatch(uint64_t samples) const {
+      return 3 * samples <= max_records &&
+             REFLCAP_FIT_QUAD_TEXELS * QuadBound(samples, per_texel) <= max_texels;
+    }
+    uint64_t DeviceQuads(uint64_t samples) const {
+      return FitsABatch(samples) ? QuadBound(samples, per_texel) : 0;
+    }
   };
 
   // Texel ranges of the chunk's batches.
@@ -172,8 +185,10 @@ class VulkanFitterImpl final : public VulkanFitter {
   Batch batches_[2];
   struct {
     gpu::Buffer settings, desc, queue, lanes, results, control;
-    internal::TexelBuffer records;
   } buffers_;
+  // The device quads of the two host batches (batches_[k] uses records_[k]), sized in Fit
+  // before any batch is prepared.
+  internal::TexelBuffer records_[2];
   VulkanFitStats stats_;
 };
 
@@ -184,8 +199,7 @@ std::vector<std::pair<uint32_t, uint32_t>> VulkanFitterImpl::CutBatches(
   uint64_t records = 0, texels = 0;
   for (uint32_t t = 0; t < chunk.texel_count; ++t) {
     const uint64_t slots = 3 * chunk.SampleCount(t);
-    const uint64_t quad_texels =
-        REFLCAP_FIT_QUAD_TEXELS * QuadBound(chunk.SampleCount(t), plan.per_texel);
+    const uint64_t quad_texels = REFLCAP_FIT_QUAD_TEXELS * plan.DeviceQuads(chunk.SampleCount(t));
     const uint64_t problems = uint64_t(t - begin + 1) * plan.per_texel;
     if (t > begin && (problems > plan.max_problems || records + slots > plan.max_records ||
                       texels + quad_texels > plan.max_texels)) {
@@ -215,14 +229,23 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
   b->quad.resize(texels + 1);
   b->quad[0] = 0;
   for (uint32_t t = 0; t < texels; ++t) {
-    b->quad[t + 1] = b->quad[t] + QuadBound(chunk.SampleCount(begin + t), per_texel);
+    b->quad[t + 1] = b->quad[t] + plan.DeviceQuads(chunk.SampleCount(begin + t));
   }
   b->problems.resize(problems);
   b->solved.resize(problems);
   b->route.assign(problems, kRouteTrivial);
   const uint64_t section = std::max<uint64_t>(1, b->slot[texels]);
   b->records.resize(section * REFLCAP_FIT_RECORD_FLOATS);
-  b->rgba.resize(std::max<uint64_t>(1, b->quad[texels]) * REFLCAP_FIT_QUAD_TEXELS * 4);
+  // On a device whose memory the host sees (lavapipe, integrated GPUs) the quads go straight into
+  // the batch's texel buffer, which the device is not reading (it runs the other batch).
+  const uint64_t quad_floats = std::max<uint64_t>(1, b->quad[texels]) * REFLCAP_FIT_QUAD_TEXELS * 4;
+  REFLCAP_CHECK(b->device_records != nullptr && b->device_records->elements() * 4 >= quad_floats);
+  if (b->device_records->mapped() != nullptr) {
+    b->quads = static_cast<float*>(b->device_records->mapped());
+  } else {
+    b->rgba.resize(quad_floats);
+    b->quads = b->rgba.data();
+  }
   float* const section_of[REFLCAP_FIT_RECORD_FLOATS] = {
       b->records.data(), b->records.data() + section, b->records.data() + 2 * section,
       b->records.data() + 3 * section, b->records.data() + 4 * section};
@@ -239,9 +262,7 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
           PrepareTexel(options, plan.layout, chunk.SamplesOf(texel), chunk.SampleCount(texel),
                        int(texel), &arena, &cursor, q);
           // A texel larger than a whole batch (alone in its batch, CutBatches) stays on the CPU.
-          const bool fits_a_batch =
-              b->slot[t + 1] - b->slot[t] <= plan.max_records &&
-              REFLCAP_FIT_QUAD_TEXELS * (b->quad[t + 1] - b->quad[t]) <= plan.max_texels;
+          const bool fits_a_batch = plan.FitsABatch(chunk.SampleCount(texel));
           uint64_t quad = b->quad[t];  // the texel's next free device quad
           for (int p = 0; p < per_texel; ++p) {
             const size_t i = size_t(t) * per_texel + p;
@@ -270,7 +291,7 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
               b->route[i] = kRouteCpu;
             } else {
               const uint64_t quads = QuadsOf(count);
-              float* texel = &b->rgba[quad * REFLCAP_FIT_QUAD_TEXELS * 4];
+              float* texel = &b->quads[quad * REFLCAP_FIT_QUAD_TEXELS * 4];
               for (uint64_t q = 0; q < quads; ++q) {
                 for (int k = 0; k < REFLCAP_FIT_QUAD_TEXELS; ++k, texel += 4) {
                   for (int c = 0; c < 4; ++c) {
@@ -348,13 +369,6 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
   REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
-  if (buffers_.records.elements() < texels) {
-    // Room to grow by a quarter, as Ensure.
-    const uint64_t want = std::min<uint64_t>(texels + texels / 4, plan.max_texels);
-    REFLCAP_ASSIGN_OR_RETURN(buffers_.records, internal::TexelBuffer::Create(
-                                                   *ctx_, std::max(want, texels),
-                                                   VK_FORMAT_R32G32B32A32_SFLOAT, 16));
-  }
 
   sh::FitGpuSettings settings{};
   {
@@ -373,7 +387,9 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, &settings, sizeof settings, buffers_.settings));
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->desc.data(), desc_bytes, buffers_.desc));
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->queue.data(), queue_bytes, buffers_.queue));
-  REFLCAP_RETURN_IF_ERROR(buffers_.records.Upload(*ctx_, cmd_, b->rgba.data(), texels * 16));
+  if (b->device_records->mapped() == nullptr) {
+    REFLCAP_RETURN_IF_ERROR(b->device_records->Upload(*ctx_, cmd_, b->rgba.data(), texels * 16));
+  }
 
   // Ticks per dispatch: the loop budget (T (Q + 2) + 1 steps for Q quads, see lm_fit.comp) and
   // the submit work cap.
@@ -403,7 +419,7 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   bindings.lanes = gpu::Bind(buffers_.lanes, 0, lane_bytes);
   bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
   bindings.control = gpu::Bind(buffers_.control, 0, sizeof(sh::FitGpuControl));
-  bindings.records = buffers_.records.view();
+  bindings.records = b->device_records->view();
   kernels_->Write(bindings);
 
   const sh::FitGpuPush push{uint32_t(b->queue.size()), lanes, uint32_t(ticks), 0};
@@ -521,6 +537,24 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
   for (ProblemArena& a : arenas_) a.Reserve(3 * max_samples, max_samples);
 
   const std::vector<std::pair<uint32_t, uint32_t>> cuts = CutBatches(chunk, plan);
+  // Device quads of the largest batch (as Prepare lays them out).
+  uint64_t max_texels = 1;
+  for (const auto& [first, last] : cuts) {
+    uint64_t quads = 0;
+    for (uint32_t t = first; t < last; ++t) quads += plan.DeviceQuads(chunk.SampleCount(t));
+    max_texels = std::max<uint64_t>(max_texels, quads * REFLCAP_FIT_QUAD_TEXELS);
+  }
+  for (size_t k = 0; k < std::min<size_t>(2, cuts.size()); ++k) {
+    if (records_[k].elements() < max_texels) {
+      // Room to grow by a quarter, as Ensure, so that chunks of slightly different sizes reuse it.
+      const uint64_t want = std::min<uint64_t>(max_texels + max_texels / 4, plan.max_texels);
+      records_[k] = internal::TexelBuffer{};  // free the old one first
+      REFLCAP_ASSIGN_OR_RETURN(records_[k], internal::TexelBuffer::Create(
+                                                *ctx_, std::max(want, max_texels),
+                                                VK_FORMAT_R32G32B32A32_SFLOAT, 16));
+    }
+    batches_[k].device_records = &records_[k];
+  }
   // Batch k runs on the device while batch k - 1 is finished and batch k + 1 prepared on the CPU
   // (two host batches: k + 1 reuses k - 1's once it is finished).
   Prepare(chunk, options, plan, cuts[0].first, cuts[0].second, &batches_[0]);

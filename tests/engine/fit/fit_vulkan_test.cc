@@ -412,6 +412,19 @@ TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   EXPECT_EQ(stats.cpu_problems, 90u * 3);
   EXPECT_EQ(stats.gpu_problems, 180u * 3);
   ExpectAgreement(Compare(reference, mixed), "CPU route");
+
+  // Batches of 200 records: a 130-sample texel (390 records) fits none, so it is alone in its
+  // batch, reserves no device memory, and its problems take the CPU route too.
+  VulkanFitterOptions tiny_batches;
+  tiny_batches.max_batch_residuals = 200;
+  auto tiny = CreateVulkanFitter(TestDevice(tiny_batches));
+  ASSERT_TRUE(tiny.ok()) << tiny.status().ToString();
+  const auto oversized = RunFitter(**tiny, chunk, options);
+  const VulkanFitStats& tiny_stats = (*tiny)->last_stats();
+  EXPECT_EQ(tiny_stats.cpu_problems, 90u * 3);
+  EXPECT_EQ(tiny_stats.gpu_problems, 180u * 3);
+  EXPECT_GT(tiny_stats.batches, 90u);
+  ExpectAgreement(Compare(reference, oversized), "texels larger than a batch");
 }
 
 // Float ulps between a and b (same sign assumed; 0 when equal).
