@@ -389,26 +389,31 @@ TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   const FitOptions options;
   const auto reference = RunFitter(SharedVulkanFitter(), chunk, options);
   EXPECT_EQ(SharedVulkanFitter().last_stats().batches, 1u);
+  // Fits the chunk with a fitter of `fitter_options`; its stats go to *stats.
+  auto fit_with = [&](const VulkanFitterOptions& fitter_options, VulkanFitStats* stats) {
+    auto fitter = CreateVulkanFitter(TestDevice(fitter_options));
+    EXPECT_TRUE(fitter.ok()) << fitter.status().ToString();
+    if (!fitter.ok()) return std::vector<TexelFit>();
+    auto fits = RunFitter(**fitter, chunk, options);
+    *stats = (*fitter)->last_stats();
+    return fits;
+  };
 
   // Batches of at most 50 problems / 4,000 records: the chunk runs as a dozen batches with their
   // own bindings, prepared and finished while the device runs the next and previous ones.
   VulkanFitterOptions small_batches;
   small_batches.max_batch_problems = 50;
   small_batches.max_batch_residuals = 4000;
-  auto batched = CreateVulkanFitter(TestDevice(small_batches));
-  ASSERT_TRUE(batched.ok()) << batched.status().ToString();
-  const auto many = RunFitter(**batched, chunk, options);
-  EXPECT_GT((*batched)->last_stats().batches, 10u);
+  VulkanFitStats stats;
+  const auto many = fit_with(small_batches, &stats);
+  EXPECT_GT(stats.batches, 10u);
   EXPECT_EQ(CountDifferent(reference, many), 0);
 
   // Problems over 100 residuals (the 130-sample texels) take the CPU route: the scalar float
   // LM, the same decisions as the device's.
   VulkanFitterOptions small_problems;
   small_problems.max_device_residuals = 100;
-  auto routed = CreateVulkanFitter(TestDevice(small_problems));
-  ASSERT_TRUE(routed.ok()) << routed.status().ToString();
-  const auto mixed = RunFitter(**routed, chunk, options);
-  const VulkanFitStats& stats = (*routed)->last_stats();
+  const auto mixed = fit_with(small_problems, &stats);
   EXPECT_EQ(stats.cpu_problems, 90u * 3);
   EXPECT_EQ(stats.gpu_problems, 180u * 3);
   ExpectAgreement(Compare(reference, mixed), "CPU route");
@@ -417,13 +422,10 @@ TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   // batch, reserves no device memory, and its problems take the CPU route too.
   VulkanFitterOptions tiny_batches;
   tiny_batches.max_batch_residuals = 200;
-  auto tiny = CreateVulkanFitter(TestDevice(tiny_batches));
-  ASSERT_TRUE(tiny.ok()) << tiny.status().ToString();
-  const auto oversized = RunFitter(**tiny, chunk, options);
-  const VulkanFitStats& tiny_stats = (*tiny)->last_stats();
-  EXPECT_EQ(tiny_stats.cpu_problems, 90u * 3);
-  EXPECT_EQ(tiny_stats.gpu_problems, 180u * 3);
-  EXPECT_GT(tiny_stats.batches, 90u);
+  const auto oversized = fit_with(tiny_batches, &stats);
+  EXPECT_EQ(stats.cpu_problems, 90u * 3);
+  EXPECT_EQ(stats.gpu_problems, 180u * 3);
+  EXPECT_GT(stats.batches, 90u);
   ExpectAgreement(Compare(reference, oversized), "texels larger than a batch");
 }
 
