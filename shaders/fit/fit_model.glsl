@@ -3,14 +3,15 @@
 // would clash), argument order, parameter layouts, clamps and saturation.
 //
 // Four residuals at a time: every function here takes and returns vec4, one residual per
-// component, each component computed exactly as the scalar C++ twin computes its one residual.
+// component, each component computed with the scalar C++ twin's formulas for its one residual.
 // Why: lavapipe runs a shader 8 invocations wide, one SIMD lane each, so a scalar sample loop is
 // one long dependency chain per iteration (log, exp, a division: latency-bound at ~1.4
 // instructions per cycle, measured with perf on its JIT code), and every loop-carried
 // accumulator costs a masked load-blend-store per iteration. Four components are four independent
-// chains the CPU overlaps, and the accumulators take one update per four residuals
-// (lm_fit.comp's sample loop: 1.8x the fits per second on lavapipe). A GPU runs the same
-// component arithmetic; only the order in which the normal equations are summed changes.
+// chains the CPU overlaps, and the accumulators take one update per four residuals (with
+// lm_fit.comp's residual quads: ~105,000 -> ~170,000 fits/s on lavapipe, bench/RESULTS.md). A GPU
+// runs the same component arithmetic; only the order in which the normal equations are summed
+// changes.
 //
 // The layout is fixed by the includer's defines (one shader permutation per layout):
 //   FIT_MODEL  0 aniso [rho, (Cx, Cy, Cz, n) per lobe], 1 iso [rho, (Cxy, Cz, n) per lobe],
