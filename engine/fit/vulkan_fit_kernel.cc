@@ -16,7 +16,7 @@ uint64_t MaxTexelBufferElements(const gpu::VkContext& ctx) {
 }
 
 StatusOr<TexelBuffer> TexelBuffer::Create(gpu::VkContext& ctx, uint64_t elements, VkFormat format,
-                                          uint32_t element_bytes) {
+                                          uint32_t element_bytes, bool allow_mapping) {
   if (elements == 0) return InvalidArgumentError("TexelBuffer: no elements");
   const uint64_t bytes = elements * element_bytes;
   if (elements > MaxTexelBufferElements(ctx)) {
@@ -51,7 +51,8 @@ StatusOr<TexelBuffer> TexelBuffer::Create(gpu::VkContext& ctx, uint64_t elements
   VK_RETURN_IF_ERROR(vkAllocateMemory(t.device_, &allocate, nullptr, &t.memory_));
   VK_RETURN_IF_ERROR(vkBindBufferMemory(t.device_, t.buffer_, t.memory_, 0));
   const VkMemoryPropertyFlags flags = ctx.MemoryTypeFlags(type);
-  if ((flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) && (flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)) {
+  if (allow_mapping && (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) &&
+      (flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)) {
     VK_RETURN_IF_ERROR(vkMapMemory(t.device_, t.memory_, 0, VK_WHOLE_SIZE, 0, &t.mapped_));
   }
   VkBufferViewCreateInfo view{};

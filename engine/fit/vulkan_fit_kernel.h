@@ -24,9 +24,11 @@ namespace reflcap::fit::internal {
 class TexelBuffer {
  public:
   // Room for `elements` (> 0) texels of `element_bytes` bytes each. Unavailable beyond the
-  // context's allocation cap or maxTexelBufferElements.
+  // context's allocation cap or maxTexelBufferElements. The memory is mapped when it is
+  // host-visible and coherent, unless `allow_mapping` is false (tests: the staging path a
+  // discrete GPU takes).
   static StatusOr<TexelBuffer> Create(gpu::VkContext& ctx, uint64_t elements, VkFormat format,
-                                      uint32_t element_bytes);
+                                      uint32_t element_bytes, bool allow_mapping = true);
   TexelBuffer() = default;
   ~TexelBuffer();
   TexelBuffer(TexelBuffer&& other) noexcept;

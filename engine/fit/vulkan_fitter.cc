@@ -551,7 +551,8 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
       records_[k] = internal::TexelBuffer{};  // free the old one first
       REFLCAP_ASSIGN_OR_RETURN(records_[k], internal::TexelBuffer::Create(
                                                 *ctx_, std::max(want, max_texels),
-                                                VK_FORMAT_R32G32B32A32_SFLOAT, 16));
+                                                VK_FORMAT_R32G32B32A32_SFLOAT, 16,
+                                                options_.map_device_records));
     }
     batches_[k].device_records = &records_[k];
   }

@@ -57,6 +57,9 @@ struct VulkanFitterOptions {
   // Upper bound on LM ticks per dispatch (0 = only the loop budget and the per-submit work cap
   // bound it). Tests use it to force many dispatches.
   uint32_t max_ticks_per_dispatch = 0;
+  // false: never write the residual quads straight into mapped device memory, upload them
+  // through the staging buffer as on a discrete GPU (tests exercise that path on lavapipe).
+  bool map_device_records = true;
 
   Status Validate() const;
 };

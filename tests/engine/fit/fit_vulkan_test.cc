@@ -418,6 +418,15 @@ TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   EXPECT_EQ(stats.gpu_problems, 180u * 3);
   ExpectAgreement(Compare(reference, mixed), "CPU route");
 
+  // The staging upload a discrete GPU's device-local memory takes, instead of writing the quads
+  // straight into mapped memory: the same bits, over several batches.
+  VulkanFitterOptions staged;
+  staged.map_device_records = false;
+  staged.max_batch_problems = 50;
+  const auto uploaded = fit_with(staged, &stats);
+  EXPECT_GT(stats.batches, 10u);
+  EXPECT_EQ(CountDifferent(reference, uploaded), 0);
+
   // Batches of 200 records: a 130-sample texel (390 records) fits none, so it is alone in its
   // batch, reserves no device memory, and its problems take the CPU route too.
   VulkanFitterOptions tiny_batches;
