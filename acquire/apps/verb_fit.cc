@@ -41,6 +41,10 @@ int RunFit(int argc, char** argv) {
   args.AddString("init", &init, "NAME",
                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  bool no_channel_retry = false;
+  args.AddFlag("no-channel-retry", &no_channel_retry,
+               "keep each channel's own LM result even where it ended far worse than the "
+               "texel's best channel, instead of solving it again from that channel's lobe");
   bool no_albedo_fill = false;
   args.AddFlag("no-albedo-fill", &no_albedo_fill,
                "leave texels with no sample at zero albedo instead of giving them the mean albedo "
@@ -98,6 +102,7 @@ int RunFit(int argc, char** argv) {
   options.select_lobe_model = auto_model;
   options.lobe_transfer.enabled = !no_lobe_transfer;
   options.albedo_fill.enabled = !no_albedo_fill;
+  options.channel_retry = !no_channel_retry;
   options.init = *init_scheme;
   options.loss = *loss_kind;
   if (Status s = options.Validate(); !s.ok()) {

@@ -148,6 +148,10 @@ int RunRun(int argc, char** argv) {
                  "aniso (default), iso, shared, or auto (aniso or iso per texel by BIC)");
   args.AddString("init", &init, "NAME", "seed (default) or fixed");
   args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  bool no_channel_retry = false;
+  args.AddFlag("no-channel-retry", &no_channel_retry,
+               "keep each channel's own LM result even where it ended far worse than the "
+               "texel's best channel, instead of solving it again from that channel's lobe");
   bool no_albedo_fill = false;
   args.AddFlag("no-albedo-fill", &no_albedo_fill,
                "leave texels with no sample at zero albedo instead of giving them the mean albedo "
@@ -194,6 +198,7 @@ int RunRun(int argc, char** argv) {
   options.fit.select_lobe_model = auto_model;
   options.fit.lobe_transfer.enabled = !no_lobe_transfer;
   options.fit.albedo_fill.enabled = !no_albedo_fill;
+  options.fit.channel_retry = !no_channel_retry;
   options.fit.init = *init_scheme;
   options.fit.loss = *loss_kind;
   for (const Status& s : {options.resample.Validate(), options.fit.Validate()}) {

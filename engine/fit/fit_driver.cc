@@ -304,6 +304,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"min_cos_theta", options.min_cos_theta},
         {"highlight_cone_deg", options.highlight_cone_deg},
         {"evidence_sigmas", options.evidence_sigmas},
+        {"channel_retry", options.channel_retry},
         {"lobe_transfer",
          {{"enabled", options.lobe_transfer.enabled},
           {"radius", options.lobe_transfer.radius},

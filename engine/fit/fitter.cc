@@ -122,7 +122,7 @@ std::string FitOptions::ToString() const {
       << ", min_cos_theta=" << min_cos_theta << ", highlight_cone_deg=" << highlight_cone_deg
       << ", evidence_sigmas=" << evidence_sigmas << ", step_tolerance=" << step_tolerance
       << ", cost_tolerance=" << cost_tolerance << ", gradient_tolerance=" << gradient_tolerance
-      << ", threads=" << threads << "}";
+      << ", channel_retry=" << (channel_retry ? "on" : "off") << ", threads=" << threads << "}";
   return out.str();
 }
 
@@ -189,6 +189,11 @@ Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
     w.arena.Reserve(3 * max_task_samples, max_samples);
     if (w.problems.size() < max_problems) w.problems.resize(max_problems);
     if (w.solved.size() < max_problems) w.solved.resize(max_problems);
+    if (w.retry.size() < max_problems) {
+      w.retry.resize(max_problems);
+      w.retry_solved.resize(max_problems);
+      w.retry_problem.resize(max_problems);
+    }
     Reserve(&w, layout, max_samples, max_problems);
   }
 
@@ -205,6 +210,21 @@ Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
           count += per_texel;
         }
         Solve(&w, options, settings, w.problems.data(), count, w.solved.data());
+        if (options.channel_retry) {
+          // Every texel's retries in one Solve call, then each keeps the better solution.
+          int retries = 0;
+          for (int i = 0; i < count; i += per_texel) {
+            const int n = PrepareChannelRetries(&w.problems[i], &w.solved[i], per_texel,
+                                                &w.retry[retries], &w.retry_problem[retries]);
+            for (int r = retries; r < retries + n; ++r) w.retry_problem[r] += i;
+            retries += n;
+          }
+          if (retries > 0) {
+            Solve(&w, options, settings, w.retry.data(), retries, w.retry_solved.data());
+            AdoptChannelRetries(w.retry_solved.data(), w.retry_problem.data(), retries,
+                                w.solved.data());
+          }
+        }
         for (int i = 0; i < count; i += per_texel) {
           TexelFit& fit = (*results)[w.problems[i].texel];
           BeginTexel(layout.lobes, &fit);

@@ -165,6 +165,10 @@ struct FitOptions {
   double step_tolerance = 1e-5;
   double cost_tolerance = 1e-5;
   double gradient_tolerance = 1e-10;
+  // Channel retry (problem.h kChannelRetryCostRatio): a channel whose fit ended far worse than
+  // its texel's best channel is solved again from that channel's lobes and keeps the better
+  // solution. Every backend runs it (`--no-channel-retry`: off).
+  bool channel_retry = true;
   // Worker threads (0 = all hardware threads).
   int threads = 0;
   LobeTransferOptions lobe_transfer;

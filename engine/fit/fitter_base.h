@@ -31,6 +31,11 @@ class FitterBase : public Fitter {
     ProblemArena arena;
     std::vector<PreparedProblem> problems;
     std::vector<SolvedProblem> solved;
+    // Channel retries (problem.h PrepareChannelRetries): the problems, their solutions, and the
+    // index in `problems` each one retries.
+    std::vector<PreparedProblem> retry;
+    std::vector<SolvedProblem> retry_solved;
+    std::vector<int> retry_problem;
     std::shared_ptr<void> backend;  // the backend's own per-worker state
   };
   // Grows the backend's per-worker state for problems of up to `max_samples` samples and

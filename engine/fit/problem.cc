@@ -433,6 +433,75 @@ bool LobeExceedsEvidence(const ProblemLayout& layout, const double* x) {
   return false;
 }
 
+namespace {
+
+// 2 cost / (residuals - free parameters) in natural noise units, or -1 for a problem without a
+// lobe fit (nothing to compare or retry).
+double ReducedCost(const PreparedProblem& q, const SolvedProblem& solved) {
+  if (q.num_stages == 0 || q.lambert_only || q.preset != FitStatus::kConverged ||
+      q.layout.lobes == 0) {
+    return -1;
+  }
+  int free = 0;
+  for (uint32_t m = solved.free_mask; m != 0; m &= m - 1) ++free;
+  const int dof = std::max(1, q.residuals.count() - free);
+  return 2 * q.scale * q.scale * q.weight_scale * solved.cost / dof;
+}
+
+}  // namespace
+
+int PrepareChannelRetries(const PreparedProblem* q, const SolvedProblem* solved, int per_texel,
+                          PreparedProblem* retry, int* channel) {
+  if (per_texel < 2 || q[0].layout.model == LobeModel::kShared) return 0;
+  int best = -1;
+  double best_cost = 0;
+  for (int p = 0; p < per_texel; ++p) {
+    const double r = ReducedCost(q[p], solved[p]);
+    if (r < 0 || solved[p].status != FitStatus::kConverged ||
+        LobeExceedsEvidence(q[p].layout, solved[p].x)) {
+      continue;
+    }
+    if (best < 0 || r < best_cost) {
+      best = p;
+      best_cost = r;
+    }
+  }
+  if (best < 0) return 0;
+  const ProblemLayout& layout = q[best].layout;
+  int count = 0;
+  for (int p = 0; p < per_texel; ++p) {
+    const double r = ReducedCost(q[p], solved[p]);
+    if (p == best || r < 0 || r <= kChannelRetryCostRatio * std::max(best_cost, 1.0)) continue;
+    PreparedProblem& out = retry[count];
+    out = q[p];
+    for (int k = 0; k < layout.lobes; ++k) {
+      const int o = LobeOffset(layout.model, k), e = ExponentIndex(layout.model, k);
+      const double n = solved[best].x[e];
+      // Natural value S (C . v)^n: the same natural lobe in channel p's normalisation.
+      const double c_scale = std::pow(q[best].scale / q[p].scale, 1.0 / n);
+      for (int j = o; j < o + ParamsPerLobe(layout.model); ++j) {
+        const double v = j == e ? n : solved[best].x[j] * c_scale;
+        out.x0[j] = std::clamp(v, q[p].lower[j], q[p].upper[j]);
+      }
+    }
+    channel[count++] = p;
+  }
+  return count;
+}
+
+int AdoptChannelRetries(const SolvedProblem* retried, const int* channel, int count,
+                        SolvedProblem* solved) {
+  int taken = 0;
+  for (int i = 0; i < count; ++i) {
+    // NaN costs never compare lower: a failed retry is never taken.
+    if (retried[i].cost < solved[channel[i]].cost) {
+      solved[channel[i]] = retried[i];
+      ++taken;
+    }
+  }
+  return taken;
+}
+
 double LambertFallback(const PreparedProblem& q, double* x) {
   const ProblemLayout& layout = q.layout;
   const ResidualView& r = q.residuals;

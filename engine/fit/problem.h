@@ -134,6 +134,28 @@ bool LobeExceedsEvidence(const ProblemLayout& layout, const double* x);
 // lobes zeroed with their exponents at the start value) and returns its cost (no robust loss).
 double LambertFallback(const PreparedProblem& q, double* x);
 
+// Channel retry (FitOptions::channel_retry; per-channel lobe models aniso and iso). A channel
+// whose LM ended far worse than its texel's best channel — reduced cost 2 cost / (residuals -
+// free parameters), in noise units, more than kChannelRetryCostRatio times the best channel's
+// (and than 1) — is solved again from the best channel's lobes, moved to its own normalisation
+// (the same natural lobe: highlights are mostly the colour of the light), with its own start
+// rho, and keeps whichever solution has the lower cost. Why: a sharp lobe started at
+// start_exponent can end in a wrong basin in one channel while the texel's other channels find
+// it (bench/RESULTS.md, reflcap bench section 1: 11 of 4,096 synthetic texels, reduced costs
+// 360-2,000 where 99 % are below 1.2, carried 96 % of the holdout error). 4: far outside the
+// spread of reduced costs between channels of well-fitted texels (1.0 +- 0.2 at 1 % noise).
+constexpr double kChannelRetryCostRatio = 4;
+
+// Writes to retry[] copies of those of a texel's `per_texel` problems q[] (solved[]) that the
+// channel retry takes, their starts moved to the best channel's lobes, and their indices (0 ..
+// per_texel - 1) to channel[]; returns how many (0 for the shared model, Lambert-only layouts,
+// or a texel without a converged channel whose lobe stays within the evidence).
+int PrepareChannelRetries(const PreparedProblem* q, const SolvedProblem* solved, int per_texel,
+                          PreparedProblem* retry, int* channel);
+// solved[channel[i]] = retried[i] for each retry whose cost is lower; returns how many were taken.
+int AdoptChannelRetries(const SolvedProblem* retried, const int* channel, int count,
+                        SolvedProblem* solved);
+
 // Folds one solved problem into its texel's TexelFit (parameters, sigma, status, cost, counts).
 // A problem that ended kSingular, or whose lobe exceeds the evidence (LobeExceedsEvidence), is
 // replaced by its Lambert-only fit (status kSingular, resp. kUnidentifiableLobe; sigma unknown).

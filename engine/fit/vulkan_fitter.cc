@@ -156,6 +156,8 @@ class VulkanFitterImpl final : public VulkanFitter {
     uint64_t max_texels = 0;       // device texels (5 per quad) per batch
     uint32_t max_device_residuals = 0;  // per problem
     uint32_t lane_cap = 0;
+    bool channel_retry = true;
+    LossKind loss = LossKind::kNone;
 
     // A texel of `samples` samples fits a batch (else it is alone in its batch and its problems
     // are solved on the CPU), and the device quads reserved for it (0 when it does not fit).
@@ -460,25 +462,38 @@ void VulkanFitterImpl::Finish(const Plan& plan, const Batch& b, std::vector<Texe
   ParallelFor(
       0, b.end - b.begin, kTexelsPerTask,
       [&](int64_t t0, int64_t t1, int) {
+        SolvedProblem solved[3], retried[3];
+        PreparedProblem retry[3];
+        int retry_problem[3];
         for (int64_t t = t0; t < t1; ++t) {
-          TexelFit& fit = (*results)[b.begin + size_t(t)];
-          BeginTexel(plan.layout.lobes, &fit);
+          const size_t first = size_t(t) * per_texel;
           for (int p = 0; p < per_texel; ++p) {
-            const size_t i = size_t(t) * per_texel + p;
+            const size_t i = first + p;
             if (b.route[i] != kRouteDevice) {
-              FinishProblem(b.problems[i], b.solved[i], &fit);
+              solved[p] = b.solved[i];
               continue;
             }
             const uint32_t* w = &b.results[i * stride];
-            SolvedProblem solved;
-            solved.status = FitStatus(int(w[sh::kFitOutStatus]));
-            solved.free_mask = w[sh::kFitOutFreeMask];
-            solved.iterations = int(w[sh::kFitOutIterations]);
-            solved.cost = BitsFloat(w[sh::kFitOutCost]);
-            for (int j = 0; j < P; ++j) solved.x[j] = BitsFloat(w[sh::kFitOutX + j]);
-            for (int k = 0; k < packed; ++k) solved.a[k] = BitsFloat(w[sh::kFitOutX + P + k]);
-            FinishProblem(b.problems[i], solved, &fit);
+            solved[p] = SolvedProblem{};
+            solved[p].status = FitStatus(int(w[sh::kFitOutStatus]));
+            solved[p].free_mask = w[sh::kFitOutFreeMask];
+            solved[p].iterations = int(w[sh::kFitOutIterations]);
+            solved[p].cost = BitsFloat(w[sh::kFitOutCost]);
+            for (int j = 0; j < P; ++j) solved[p].x[j] = BitsFloat(w[sh::kFitOutX + j]);
+            for (int k = 0; k < packed; ++k) solved[p].a[k] = BitsFloat(w[sh::kFitOutX + P + k]);
           }
+          if (plan.channel_retry) {
+            // The few retried channels run the device's scalar twin here (lm.h in float).
+            const int n = PrepareChannelRetries(&b.problems[first], solved, per_texel, retry,
+                                                retry_problem);
+            for (int r = 0; r < n; ++r) {
+              retried[r] = SolveScalar<float>(retry[r], plan.settings, plan.loss);
+            }
+            AdoptChannelRetries(retried, retry_problem, n, solved);
+          }
+          TexelFit& fit = (*results)[b.begin + size_t(t)];
+          BeginTexel(plan.layout.lobes, &fit);
+          for (int p = 0; p < per_texel; ++p) FinishProblem(b.problems[first + p], solved[p], &fit);
         }
       },
       plan.workers);
@@ -497,6 +512,8 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
   plan.per_texel = ProblemsPerTexel(plan.layout.model);
   plan.num_params = plan.layout.NumParams();
   plan.settings = MakeLmSettings(options);
+  plan.channel_retry = options.channel_retry;
+  plan.loss = options.loss;
   plan.workers = options.threads > 0 ? options.threads
                  : options_.threads > 0 ? options_.threads
                                         : HardwareThreads();

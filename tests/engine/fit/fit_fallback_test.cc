@@ -54,3 +54,95 @@ TEST(LambertFallback, IsTheWeightedLeastSquaresAlbedoWithTheLobeZeroed) {
 
 }  // namespace
 }  // namespace reflcap::fit
+
+namespace reflcap::fit {
+namespace {
+
+// Three aniso K = 1 channel problems of 100 residuals, fitted in two stages, with `scale` as
+// their normalisation and the given LM costs (normalised units, all 5 parameters free).
+struct ThreeChannels {
+  PreparedProblem q[3];
+  SolvedProblem solved[3];
+  ThreeChannels(const double (&cost)[3], const double (&scale)[3]) {
+    for (int c = 0; c < 3; ++c) {
+      q[c].layout = {LobeModel::kAniso, 1};
+      q[c].problem = c;
+      q[c].residuals.begin[1] = q[c].residuals.begin[2] = q[c].residuals.begin[3] = 100;
+      q[c].scale = scale[c];
+      q[c].num_stages = 2;
+      for (int j = 0; j < 5; ++j) {
+        q[c].lower[j] = j == 4 ? 1 : -1e3;
+        q[c].upper[j] = j == 4 ? 1e4 : 1e3;
+      }
+      q[c].x0[0] = 0.1 * (c + 1);
+      q[c].x0[4] = 20;
+      const double x[5] = {0.3, -0.9, -0.9, 0.9, 100};  // within the evidence: 0.9^100
+      std::copy(x, x + 5, solved[c].x);
+      solved[c].cost = cost[c];
+      solved[c].free_mask = 0x1F;
+      solved[c].status = FitStatus::kConverged;
+    }
+  }
+};
+
+TEST(ChannelRetry, RetriesOnlyChannelsFarWorseThanTheBestFromItsLobe) {
+  // Reduced costs 2 S^2 cost / 95 (natural noise units): 1.05, 1.16, 21 (S = 0.5) -> only
+  // channel 2 exceeds 4 x max(1.05, 1).
+  ThreeChannels t({50, 55, 4000}, {1, 1, 0.5});
+  t.solved[0].x[4] = 200;
+  PreparedProblem retry[3];
+  int channel[3];
+  ASSERT_EQ(PrepareChannelRetries(t.q, t.solved, 3, retry, channel), 1);
+  EXPECT_EQ(channel[0], 2);
+  // Channel 0's lobe in channel 2's normalisation (S 1 vs 0.5: the same natural lobe is twice as
+  // tall there): C x 2^(1/200), n kept; the start rho stays channel 2's own.
+  const double f = std::pow(2.0, 1.0 / 200);
+  EXPECT_DOUBLE_EQ(retry[0].x0[0], 0.3);
+  EXPECT_NEAR(retry[0].x0[1], -0.9 * f, 1e-12);
+  EXPECT_NEAR(retry[0].x0[3], 0.9 * f, 1e-12);
+  EXPECT_DOUBLE_EQ(retry[0].x0[4], 200);
+  EXPECT_EQ(retry[0].problem, 2);
+
+  // Within 4x of the best: no retry.
+  ThreeChannels close({50, 150, 180}, {1, 1, 1});
+  EXPECT_EQ(PrepareChannelRetries(close.q, close.solved, 3, retry, channel), 0);
+  // The reference must have converged with a lobe inside the evidence: with channel 0 singular,
+  // channel 1 (1.16) is the reference, channel 2 is retried from its lobe (n = 100, S 1 vs 0.5),
+  // and channel 0 (1.05) is not.
+  t.solved[0].status = FitStatus::kSingular;
+  ASSERT_EQ(PrepareChannelRetries(t.q, t.solved, 3, retry, channel), 1);
+  EXPECT_EQ(channel[0], 2);
+  EXPECT_DOUBLE_EQ(retry[0].x0[4], 100);
+  EXPECT_NEAR(retry[0].x0[3], 0.9 * std::pow(2.0, 1.0 / 100), 1e-12);
+  // Channel 1 with |Cx| = 1.5 at n = 1000 (supremum 1.5^1000, beyond kMaxLobeSupremum): no
+  // reference at all.
+  t.solved[1].x[4] = 1000;
+  t.solved[1].x[1] = t.solved[1].x[2] = -1.5;
+  EXPECT_EQ(PrepareChannelRetries(t.q, t.solved, 3, retry, channel), 0);
+}
+
+TEST(ChannelRetry, NothingToRetryWithoutPerChannelLobes) {
+  ThreeChannels t({50, 55, 1000}, {1, 1, 1});
+  PreparedProblem retry[3];
+  int channel[3];
+  for (PreparedProblem& q : t.q) q.lambert_only = true;
+  EXPECT_EQ(PrepareChannelRetries(t.q, t.solved, 3, retry, channel), 0);
+  EXPECT_EQ(PrepareChannelRetries(t.q, t.solved, 1, retry, channel), 0);  // shared: one problem
+}
+
+TEST(ChannelRetry, KeepsTheLowerCostAndNeverANan) {
+  SolvedProblem solved[3], retried[2];
+  solved[1].cost = 10;
+  solved[2].cost = 10;
+  retried[0].cost = 12;  // worse: channel 1 keeps its own
+  retried[1].cost = std::nan("");
+  const int channel[2] = {1, 2};
+  EXPECT_EQ(AdoptChannelRetries(retried, channel, 2, solved), 0);
+  EXPECT_EQ(solved[1].cost, 10);
+  retried[1].cost = 3;
+  EXPECT_EQ(AdoptChannelRetries(retried, channel, 2, solved), 1);
+  EXPECT_EQ(solved[2].cost, 3);
+}
+
+}  // namespace
+}  // namespace reflcap::fit
