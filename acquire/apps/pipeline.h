@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <string>
 
+#include "acquire/apps/cli.h"
 #include "acquire/resample/resample.h"
 #include "engine/core/status.h"
 #include "engine/fit/fitter.h"
@@ -35,6 +36,17 @@ struct FitBackendChoice {
   std::string choice;  // "auto: cpu (...)" when auto chose, else empty
 };
 StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std::string& device);
+
+// The fitting options `fit` and `run` share — lobes, lobe model, start, loss, the post-fit steps
+// and their knobs, the step cap: Register binds them to `args` (numbers straight into *options),
+// Apply, after Parse, turns the names and switches into *options (InvalidArgument for an unknown
+// name: a usage error). Implemented in verb_fit.cc.
+struct FitFlags {
+  std::string lobe_model = "aniso", init = "seed", loss = "none";
+  bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
+  void Register(ArgParser* args, fit::FitOptions* options);
+  Status Apply(fit::FitOptions* options) const;
+};
 
 // Resample (train) -> fit -> render (holdout) -> validate into `out` (staged).
 StatusOr<PipelineSummary> RunPipeline(const std::filesystem::path& capture,

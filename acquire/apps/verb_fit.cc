@@ -11,11 +11,57 @@
 
 namespace reflcap::cli {
 
+void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
+  args->AddInt("lobes", &options->lobes,
+               "Lafortune lobes per texel, 0..3 (default 1; 0 = Lambert only; shared: <= 2)");
+  args->AddString("lobe-model", &lobe_model, "MODEL",
+                  "aniso (default), iso (Cx = Cy), shared (one lobe shape, per-channel scale), or "
+                  "auto (aniso or iso per texel, the better by BIC)");
+  args->AddString("init", &init, "NAME",
+                  "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one "
+                  "stage)");
+  args->AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
+  args->AddFlag("no-channel-retry", &no_channel_retry,
+                "keep each channel's own LM result even where it ended far worse than the "
+                "texel's best channel, instead of solving it again from that channel's lobe");
+  args->AddFlag("no-albedo-fill", &no_albedo_fill,
+                "leave texels with no sample at zero albedo instead of giving them the mean "
+                "albedo of the texels around them");
+  args->AddFlag("no-lobe-transfer", &no_lobe_transfer,
+                "keep Lambert-only the texels that never saw their mirror configuration, instead "
+                "of lending them a similar neighbour's lobe");
+  args->AddInt("lobe-transfer-radius", &options->lobe_transfer.radius,
+               "lobe transfer: donors within N atlas texels (default 6)");
+  args->AddDouble("lobe-transfer-albedo", &options->lobe_transfer.albedo_tolerance,
+                  "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
+  args->AddInt("lobe-transfer-rounds", &options->lobe_transfer.rounds,
+               "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
+  args->AddDouble("highlight-cone", &options->highlight_cone_deg,
+                  "a lobe is fitted only where some sample lies within DEG of the mirror "
+                  "direction (default 5)");
+  args->AddInt("max-iterations", &options->max_iterations,
+               "LM steps per stage, 1..10000 (default 100)");
+}
+
+Status FitFlags::Apply(fit::FitOptions* options) const {
+  // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
+  const bool auto_model = lobe_model == "auto";
+  REFLCAP_ASSIGN_OR_RETURN(options->lobe_model,
+                           fit::ParseLobeModel(auto_model ? "aniso" : lobe_model));
+  REFLCAP_ASSIGN_OR_RETURN(options->init, fit::ParseInitScheme(init));
+  REFLCAP_ASSIGN_OR_RETURN(options->loss, fit::ParseLossKind(loss));
+  options->select_lobe_model = auto_model;
+  options->lobe_transfer.enabled = !no_lobe_transfer;
+  options->albedo_fill.enabled = !no_albedo_fill;
+  options->channel_retry = !no_channel_retry;
+  return OkStatus();
+}
+
 int RunFit(int argc, char** argv) {
-  std::string samples, out, backend_name = "auto", device, lobe_model = "aniso", init = "seed",
-              loss = "none";
+  std::string samples, out, backend_name = "auto", device;
   fit::FitOptions options;
-  bool overwrite = false, no_lobe_transfer = false;
+  FitFlags fit_flags;
+  bool overwrite = false;
   ArgParser args("fit", "SAMPLES --out FIT [options]",
                  "Fit every texel's BRDF (Lambert + K Lafortune lobes per RGB channel) to the\n"
                  "samples of a store written by `reflcap resample`: the seed paper's data-driven\n"
@@ -34,36 +80,9 @@ int RunFit(int argc, char** argv) {
   args.AddString("device", &device, "NAME|INDEX",
                  "Vulkan device: index or name substring (default: automatic, a discrete GPU "
                  "first); with auto it asks for that device");
-  args.AddInt("lobes", &options.lobes, "Lafortune lobes per texel, 0..3 (default 1; shared: <= 2)");
-  args.AddString("lobe-model", &lobe_model, "MODEL",
-                 "aniso (default), iso (Cx = Cy), shared (one lobe shape, per-channel scale), or "
-                 "auto (aniso or iso per texel, the better by BIC)");
-  args.AddString("init", &init, "NAME",
-                 "seed (data-driven start + two-stage LM, default) or fixed (fixed start, one stage)");
-  args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
-  bool no_channel_retry = false;
-  args.AddFlag("no-channel-retry", &no_channel_retry,
-               "keep each channel's own LM result even where it ended far worse than the "
-               "texel's best channel, instead of solving it again from that channel's lobe");
-  bool no_albedo_fill = false;
-  args.AddFlag("no-albedo-fill", &no_albedo_fill,
-               "leave texels with no sample at zero albedo instead of giving them the mean albedo "
-               "of the texels around them");
-  args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
-               "keep Lambert-only the texels that never saw their mirror configuration, instead "
-               "of lending them a similar neighbour's lobe");
-  args.AddInt("lobe-transfer-radius", &options.lobe_transfer.radius,
-              "lobe transfer: donors within N atlas texels (default 6)");
-  args.AddDouble("lobe-transfer-albedo", &options.lobe_transfer.albedo_tolerance,
-                 "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
-  args.AddInt("lobe-transfer-rounds", &options.lobe_transfer.rounds,
-              "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
-  args.AddDouble("highlight-cone", &options.highlight_cone_deg,
-                 "a lobe is fitted only where some sample lies within DEG of the mirror "
-                 "direction (default 5)");
+  fit_flags.Register(&args, &options);
   args.AddDouble("loss-scale", &options.loss_scale,
                  "robust loss scale in noise standard deviations (default 3)");
-  args.AddInt("max-iterations", &options.max_iterations, "LM steps per stage, 1..10000 (default 100)");
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite, "replace FIT if it exists (only once the new one is complete)");
   bool help = false;
@@ -87,24 +106,10 @@ int RunFit(int argc, char** argv) {
     }
     return ReportError("fit", backend.status());
   }
-  // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
-  const bool auto_model = lobe_model == "auto";
-  auto model = fit::ParseLobeModel(auto_model ? "aniso" : lobe_model);
-  auto init_scheme = fit::ParseInitScheme(init);
-  auto loss_kind = fit::ParseLossKind(loss);
-  for (const Status* s : {&model.status(), &init_scheme.status(), &loss_kind.status()}) {
-    if (!s->ok()) {
-      std::fprintf(stderr, "reflcap fit: %s\n", s->message().c_str());
-      return kExitUsage;
-    }
+  if (Status s = fit_flags.Apply(&options); !s.ok()) {
+    std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
+    return kExitUsage;
   }
-  options.lobe_model = *model;
-  options.select_lobe_model = auto_model;
-  options.lobe_transfer.enabled = !no_lobe_transfer;
-  options.albedo_fill.enabled = !no_albedo_fill;
-  options.channel_retry = !no_channel_retry;
-  options.init = *init_scheme;
-  options.loss = *loss_kind;
   if (Status s = options.Validate(); !s.ok()) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
     return kExitUsage;

@@ -128,9 +128,9 @@ std::string PipelineSummaryLine(const PipelineSummary& s) {
 }
 
 int RunRun(int argc, char** argv) {
-  std::string capture, out, backend = "auto", device, lobe_model = "aniso", init = "seed", loss = "none";
+  std::string capture, out, backend = "auto", device;
   PipelineOptions options;
-  bool no_lobe_transfer = false;
+  FitFlags fit_flags;
   ArgParser args("run", "CAPTURE --out DIR [options]",
                  "The whole pipeline: resample the train split -> fit -> re-render the holdout\n"
                  "split -> validate. DIR gets samples/, fit/, renders/ and report/ (the outputs of\n"
@@ -143,32 +143,7 @@ int RunRun(int argc, char** argv) {
   args.AddString("backend", &backend, "NAME",
                  "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
-  args.AddInt("lobes", &options.fit.lobes, "Lafortune lobes per texel, 0..3 (default 1; 0 = Lambert only)");
-  args.AddString("lobe-model", &lobe_model, "MODEL",
-                 "aniso (default), iso, shared, or auto (aniso or iso per texel by BIC)");
-  args.AddString("init", &init, "NAME", "seed (default) or fixed");
-  args.AddString("loss", &loss, "NAME", "none (default), huber or cauchy");
-  bool no_channel_retry = false;
-  args.AddFlag("no-channel-retry", &no_channel_retry,
-               "keep each channel's own LM result even where it ended far worse than the "
-               "texel's best channel, instead of solving it again from that channel's lobe");
-  bool no_albedo_fill = false;
-  args.AddFlag("no-albedo-fill", &no_albedo_fill,
-               "leave texels with no sample at zero albedo instead of giving them the mean albedo "
-               "of the texels around them");
-  args.AddFlag("no-lobe-transfer", &no_lobe_transfer,
-               "keep Lambert-only the texels that never saw their mirror configuration, instead "
-               "of lending them a similar neighbour's lobe");
-  args.AddInt("lobe-transfer-radius", &options.fit.lobe_transfer.radius,
-              "lobe transfer: donors within N atlas texels (default 6)");
-  args.AddDouble("lobe-transfer-albedo", &options.fit.lobe_transfer.albedo_tolerance,
-                 "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
-  args.AddInt("lobe-transfer-rounds", &options.fit.lobe_transfer.rounds,
-              "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
-  args.AddDouble("highlight-cone", &options.fit.highlight_cone_deg,
-                 "a lobe is fitted only where some sample lies within DEG of the mirror "
-                 "direction (default 5)");
-  args.AddInt("max-iterations", &options.fit.max_iterations, "LM steps per stage (default 100)");
+  fit_flags.Register(&args, &options.fit);
   args.AddFlag("overwrite", &options.overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
@@ -183,24 +158,10 @@ int RunRun(int argc, char** argv) {
     std::fprintf(stderr, "reflcap run: --out DIR is required\n");
     return kExitUsage;
   }
-  // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
-  const bool auto_model = lobe_model == "auto";
-  auto model = fit::ParseLobeModel(auto_model ? "aniso" : lobe_model);
-  auto init_scheme = fit::ParseInitScheme(init);
-  auto loss_kind = fit::ParseLossKind(loss);
-  for (const Status& s : {model.status(), init_scheme.status(), loss_kind.status()}) {
-    if (!s.ok()) {
-      std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
-      return kExitUsage;
-    }
+  if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
+    std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+    return kExitUsage;
   }
-  options.fit.lobe_model = *model;
-  options.fit.select_lobe_model = auto_model;
-  options.fit.lobe_transfer.enabled = !no_lobe_transfer;
-  options.fit.albedo_fill.enabled = !no_albedo_fill;
-  options.fit.channel_retry = !no_channel_retry;
-  options.fit.init = *init_scheme;
-  options.fit.loss = *loss_kind;
   for (const Status& s : {options.resample.Validate(), options.fit.Validate()}) {
     if (!s.ok()) {
       std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
