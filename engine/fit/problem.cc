@@ -444,7 +444,7 @@ double ReducedCost(const PreparedProblem& q, const SolvedProblem& solved) {
   }
   int free = 0;
   for (uint32_t m = solved.free_mask; m != 0; m &= m - 1) ++free;
-  const int dof = std::max(1, q.residuals.count() - free);
+  const int dof = std::max(1, q.residuals.count() - free);  // no redundancy: the cost itself
   return 2 * q.scale * q.scale * q.weight_scale * solved.cost / dof;
 }
 
@@ -471,6 +471,8 @@ int PrepareChannelRetries(const PreparedProblem* q, const SolvedProblem* solved,
   int count = 0;
   for (int p = 0; p < per_texel; ++p) {
     const double r = ReducedCost(q[p], solved[p]);
+    // max(.., 1): a best channel fitted below the noise level must not make noise-level
+    // channels look far worse.
     if (p == best || r < 0 || r <= kChannelRetryCostRatio * std::max(best_cost, 1.0)) continue;
     PreparedProblem& out = retry[count];
     out = q[p];
@@ -481,7 +483,7 @@ int PrepareChannelRetries(const PreparedProblem* q, const SolvedProblem* solved,
       const double c_scale = std::pow(q[best].scale / q[p].scale, 1.0 / n);
       for (int j = o; j < o + ParamsPerLobe(layout.model); ++j) {
         const double v = j == e ? n : solved[best].x[j] * c_scale;
-        out.x0[j] = std::clamp(v, q[p].lower[j], q[p].upper[j]);
+        out.x0[j] = std::clamp(v, q[p].lower[j], q[p].upper[j]);  // starts lie within the bounds
       }
     }
     channel[count++] = p;
