@@ -462,9 +462,12 @@ void VulkanFitterImpl::Finish(const Plan& plan, const Batch& b, std::vector<Texe
   ParallelFor(
       0, b.end - b.begin, kTexelsPerTask,
       [&](int64_t t0, int64_t t1, int) {
-        SolvedProblem solved[3], retried[3];
-        PreparedProblem retry[3];
-        int retry_problem[3];
+        constexpr int kMaxPerTexel = ProblemsPerTexel(LobeModel::kAniso);  // aniso, iso: 3
+        static_assert(kMaxPerTexel >= ProblemsPerTexel(LobeModel::kIso) &&
+                      kMaxPerTexel >= ProblemsPerTexel(LobeModel::kShared));
+        SolvedProblem solved[kMaxPerTexel], retried[kMaxPerTexel];
+        PreparedProblem retry[kMaxPerTexel];
+        int retry_problem[kMaxPerTexel];
         for (int64_t t = t0; t < t1; ++t) {
           const size_t first = size_t(t) * per_texel;
           for (int p = 0; p < per_texel; ++p) {
