@@ -14,6 +14,7 @@
 
 #include "engine/gpu/vk_buffer.h"
 #include "engine/gpu/vk_commands.h"
+#include "engine/gpu/depth_pass.h"
 #include "engine/gpu/vk_context.h"
 #include "engine/gpu/vk_descriptors.h"
 #include "engine/gpu/vk_graphics_pipeline.h"
@@ -29,6 +30,10 @@ using gpu::Buffer;
 using gpu::DescriptorSet;
 using gpu::DescriptorSetLayout;
 using gpu::DeviceImage;
+using gpu::kComp;
+using gpu::kGfx;
+using gpu::kSsbo;
+using gpu::kTex;
 using gpu::MemoryKind;
 using gpu::Pipeline;
 using gpu::RenderTarget;
@@ -46,21 +51,14 @@ static_assert(sh::kMaskKept == uint32_t(Outcome::kKept) &&
               sh::kMaskDark == uint32_t(Outcome::kDark) && kOutcomeCount == 11,
               "shaders/shared/resample_masks.h outcome codes must equal resample::Outcome");
 
+// The light pass (gpu::LightMapPass) pushes a LightMapPush; mask_light.frag reads a MaskDrawPush.
+static_assert(sizeof(sh::MaskDrawPush) == sizeof(sh::LightMapPush),
+              "MaskDrawPush must have LightMapPush's layout (a single uint view)");
+
 // Descriptor bindings (shaders/resample/masks_common.glsl).
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindLightMap = 3,
                    kBindCameraMap = 4, kBindTexels = 5, kBindRays = 6, kBindPixels = 7,
                    kBindOutcomes = 8, kBindSamples = 9;
-// Bounding-sphere inflation: geometry exactly on the sphere stays inside every frustum.
-constexpr double kSphereInflation = 1.01;
-// A point light farther than this many bounding radii from the centre gets one fitted frustum
-// (~10x the texels on the object that a cube face gives); nearer, a cube map.
-constexpr double kFitMargin = 1.05;
-// Cube-map near plane relative to the bounding radius: occluders closer to a point light than
-// this are clipped (a light that close to a surface is outside any real rig).
-constexpr double kCubeNearFraction = 1e-3;
-// Camera near plane as a fraction of the far plane when the camera is inside the bounding
-// sphere: keeps float depth usable (geometry nearer than that is clipped).
-constexpr double kMinNearFraction = 1e-4;
 // Camera-map texels around the undistorted footprint of a distorted photograph: nearest-texel
 // rounding reaches half a texel beyond the outermost pixel ray.
 constexpr int kMapMargin = 2;
@@ -71,93 +69,18 @@ constexpr double kMaxMapRatio = 4;
 // any minStorageBufferOffsetAlignment (<= 256 bytes by the Vulkan spec; 1024 x 4 bytes).
 constexpr uint64_t kChunkAlignTexels = 1024;
 
-using gpu::Basis;
 using gpu::Homogeneous;
+using gpu::kSphereInflation;
+using gpu::MakePassTarget;
+using gpu::PassTarget;
 using gpu::SetRows;
 using gpu::V4;
-using gpu::ViewMatrix;
 
 void SetRigidRows(const Rigid3& t, sh::vec4 rows[3]) {
   for (int r = 0; r < 3; ++r) {
     rows[r] = {float(t.rotation(r, 0)), float(t.rotation(r, 1)), float(t.rotation(r, 2)),
                float(t.translation(r))};
   }
-}
-
-sh::MaskView PerspectiveView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
-                             const Vec3d& up, double tan_half, double near, double far) {
-  sh::MaskView v{};
-  Mat4d proj = Mat4d::Zero();
-  proj(0, 0) = 1 / tan_half;
-  proj(1, 1) = 1 / tan_half;
-  proj(2, 2) = far / (far - near);
-  proj(2, 3) = -far * near / (far - near);
-  proj(3, 2) = 1;
-  SetRows(proj * ViewMatrix(origin, forward, right, up), v.clip_from_object);
-  v.origin = V4(origin, 1);
-  // Distance scale: the longest ray inside the frustum (to a far corner).
-  v.forward = V4(forward, far * std::sqrt(1 + 2 * tan_half * tan_half));
-  v.right = V4(right, tan_half);
-  v.up = V4(up, tan_half);
-  return v;
-}
-
-sh::MaskView OrthographicView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
-                              const Vec3d& up, double half_width, double depth) {
-  sh::MaskView v{};
-  Mat4d proj = Mat4d::Zero();
-  proj(0, 0) = 1 / half_width;
-  proj(1, 1) = 1 / half_width;
-  proj(2, 2) = 1 / depth;
-  proj(3, 3) = 1;
-  SetRows(proj * ViewMatrix(origin, forward, right, up), v.clip_from_object);
-  v.origin = V4(origin, 0);
-  v.forward = V4(forward, depth);  // distance scale: the box's depth
-  v.right = V4(right, half_width);
-  v.up = V4(up, half_width);
-  return v;
-}
-
-// Images of one pass and their render target (held by pointer: the target keeps their addresses).
-struct PassTarget {
-  std::unique_ptr<DeviceImage> color;  // null for the depth-only light pass
-  std::unique_ptr<DeviceImage> depth;
-  RenderTarget target;
-  uint32_t width = 0, height = 0, layers = 0;
-};
-
-StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(gpu::VkContext& ctx, uint32_t w, uint32_t h,
-                                                     uint32_t layers, bool with_color) {
-  auto t = std::make_unique<PassTarget>();
-  t->width = w;
-  t->height = h;
-  t->layers = layers;
-  std::vector<DeviceImage*> colors;
-  if (with_color) {
-    gpu::ImageOptions o;
-    o.width = w;
-    o.height = h;
-    o.format = VK_FORMAT_R32G32B32A32_SFLOAT;
-    o.usage = VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
-    REFLCAP_ASSIGN_OR_RETURN(DeviceImage img, DeviceImage::Create(ctx, o));
-    t->color = std::make_unique<DeviceImage>(std::move(img));
-    colors.push_back(t->color.get());
-  }
-  gpu::ImageOptions d;
-  d.width = w;
-  d.height = h;
-  d.layers = layers;
-  d.format = VK_FORMAT_D32_SFLOAT;
-  d.usage = VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT |
-            (with_color ? VkImageUsageFlags{0} : VkImageUsageFlags{VK_IMAGE_USAGE_SAMPLED_BIT});
-  REFLCAP_ASSIGN_OR_RETURN(DeviceImage depth, DeviceImage::Create(ctx, d));
-  t->depth = std::make_unique<DeviceImage>(std::move(depth));
-  REFLCAP_ASSIGN_OR_RETURN(
-      t->target,
-      RenderTarget::Create(ctx, colors, t->depth.get(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
-                           with_color ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL
-                                      : VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
-  return t;
 }
 
 // The camera-map grid of one camera and, for a pinhole camera, the undistorted normalised
@@ -171,19 +94,9 @@ struct CameraGrid {
 }  // namespace
 
 Status VulkanMaskOptions::Validate() const {
-  if (!(light_texels_per_pixel > 0 && light_texels_per_pixel <= 64)) {
-    return InvalidArgumentError("light_texels_per_pixel must be in (0, 64], got ",
-                                light_texels_per_pixel);
-  }
-  for (int r : {min_light_resolution, max_light_resolution, max_cube_resolution}) {
-    if (r < 16 || r > 16384) {
-      return InvalidArgumentError("light-map resolution bounds must be in [16, 16384], got ", r);
-    }
-  }
-  if (min_light_resolution > max_light_resolution) {
-    return InvalidArgumentError("min_light_resolution ", min_light_resolution,
-                                " exceeds max_light_resolution ", max_light_resolution);
-  }
+  REFLCAP_RETURN_IF_ERROR(gpu::ValidateLightMapResolution(
+      "light", light_texels_per_pixel, min_light_resolution, max_light_resolution,
+      max_cube_resolution));
   if (!(light_bias_texels >= 0 && light_bias_texels <= 16)) {
     return InvalidArgumentError("light_bias_texels must be in [0, 16], got ", light_bias_texels);
   }
@@ -209,15 +122,16 @@ struct VulkanMasks::Impl {
   std::unique_ptr<gpu::VkContext> ctx;
   gpu::CommandBuffer cmd;
   gpu::Sampler sampler;
-  DescriptorSetLayout light_layout, camera_layout, texel_layout;
-  DescriptorSet light_set, camera_set;
+  gpu::LightMapPass light_pass;
+  DescriptorSetLayout camera_layout, texel_layout;
+  DescriptorSet camera_set;
   std::vector<DescriptorSet> texel_sets;  // one per texel chunk
-  Pipeline light_pipeline, camera_pipeline, texel_pipeline;
+  Pipeline camera_pipeline, texel_pipeline;
 
   std::unique_ptr<Buffer> params, corners, triangle_normals, texels, pixels, outcomes, samples,
       map_readback, no_rays;
   std::map<int, CameraGrid> grids;  // by camera index
-  std::unique_ptr<PassTarget> light_target, camera_target;
+  std::unique_ptr<PassTarget> camera_target;
   uint32_t triangle_count = 0;
   uint32_t texel_count = 0;
   uint32_t chunk_texels = 0;
@@ -226,7 +140,6 @@ struct VulkanMasks::Impl {
 
   Status Init(const TriangleMesh& mesh);
   StatusOr<CameraGrid*> Grid(int camera_index);
-  Status EnsureLightTarget(uint32_t res, uint32_t layers);
   Status EnsureCameraTarget(uint32_t w, uint32_t h);
   void Draw(const Pipeline& pipeline, const DescriptorSet& set, uint32_t view) {
     pipeline.Bind(cmd.handle(), set.handle());
@@ -238,24 +151,13 @@ struct VulkanMasks::Impl {
 
 Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
   gpu::VkContext& c = *ctx;
-  if (!gpu::FormatSupports(
-          c, VK_FORMAT_R32G32B32A32_SFLOAT,
-          VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT) ||
-      !gpu::FormatSupports(
-          c, VK_FORMAT_D32_SFLOAT,
-          VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT)) {
-    return UnavailableError("Vulkan device ", c.info().name,
-                            " cannot render to and sample RGBA32F and D32 images (masks)");
-  }
+  REFLCAP_RETURN_IF_ERROR(gpu::CheckPassFormats(c, {VK_FORMAT_R32G32B32A32_SFLOAT}, "masks"));
   REFLCAP_ASSIGN_OR_RETURN(cmd, gpu::CommandBuffer::Create(c));
   REFLCAP_ASSIGN_OR_RETURN(sampler, gpu::Sampler::Create(c));
-  constexpr VkDescriptorType kSsbo = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-  constexpr VkDescriptorType kTex = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-  constexpr VkShaderStageFlags kGfx = VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT;
-  constexpr VkShaderStageFlags kComp = VK_SHADER_STAGE_COMPUTE_BIT;
   REFLCAP_ASSIGN_OR_RETURN(
-      light_layout,
-      DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx}, {kBindCorners, kSsbo, kGfx}}));
+      light_pass, gpu::LightMapPass::Create(c, {gpu::ShaderId::kResampleMaskDrawVert,
+                                                gpu::ShaderId::kResampleMaskLightFrag, kBindParams,
+                                                kBindCorners}));
   REFLCAP_ASSIGN_OR_RETURN(camera_layout,
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx},
                                                            {kBindCorners, kSsbo, kGfx},
@@ -270,7 +172,6 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                                                            {kBindPixels, kSsbo, kComp},
                                                            {kBindOutcomes, kSsbo, kComp},
                                                            {kBindSamples, kSsbo, kComp}}));
-  REFLCAP_ASSIGN_OR_RETURN(light_set, DescriptorSet::Create(c, light_layout));
   REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
   REFLCAP_ASSIGN_OR_RETURN(
       texel_pipeline,
@@ -401,31 +302,14 @@ StatusOr<CameraGrid*> VulkanMasks::Impl::Grid(int camera_index) {
   return &grids.emplace(camera_index, std::move(g)).first->second;
 }
 
-Status VulkanMasks::Impl::EnsureLightTarget(uint32_t res, uint32_t layers) {
-  if (light_target != nullptr && light_target->width == res && light_target->layers == layers) {
-    return OkStatus();
-  }
-  light_target.reset();
-  REFLCAP_ASSIGN_OR_RETURN(light_target, MakePassTarget(*ctx, res, res, layers, false));
-  if (light_pipeline.handle() == VK_NULL_HANDLE) {
-    gpu::GraphicsPipelineOptions o;
-    o.vertex = gpu::ShaderId::kResampleMaskDrawVert;
-    o.fragment = gpu::ShaderId::kResampleMaskLightFrag;
-    o.set_layout = light_layout.handle();
-    o.push_constant_bytes = sizeof(sh::MaskDrawPush);
-    o.color_writes = false;
-    REFLCAP_ASSIGN_OR_RETURN(light_pipeline,
-                             Pipeline::CreateGraphics(*ctx, o, light_target->target));
-  }
-  return OkStatus();
-}
-
 Status VulkanMasks::Impl::EnsureCameraTarget(uint32_t w, uint32_t h) {
   if (camera_target != nullptr && camera_target->width == w && camera_target->height == h) {
     return OkStatus();
   }
   camera_target.reset();
-  REFLCAP_ASSIGN_OR_RETURN(camera_target, MakePassTarget(*ctx, w, h, 1, true));
+  REFLCAP_ASSIGN_OR_RETURN(camera_target,
+                           MakePassTarget(*ctx, w, h, 1, {VK_FORMAT_R32G32B32A32_SFLOAT},
+                                          VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, false));
   if (camera_pipeline.handle() == VK_NULL_HANDLE) {
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kResampleMaskDrawVert;
@@ -527,13 +411,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   const Vec3d light_dir_in_object = (object_from_world.rotation * light.direction).normalized();
 
   const double centre_z = (cam_from_object * m.centre).z();
-  double near = pinhole ? std::max(centre_z - m.radius, (centre_z + m.radius) * kMinNearFraction)
-                        : std::max(0.0, centre_z - m.radius);
-  double far = centre_z + m.radius;
-  if (!(far > 0) || !(far > near)) {
-    near = 1e-3;
-    far = 1.0;  // the object is behind the camera: every texel projects outside anyway
-  }
+  double near = 0, far = 0;
+  gpu::CameraDepthRange(pinhole, centre_z, m.radius, &near, &far);
 
   sh::MaskParams p{};
   const Mat4d object_to_cam = Homogeneous(cam_from_object);
@@ -586,57 +465,20 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   // Pixel size at the object's centre; at least one radius away (a camera inside the sphere).
   const double pixel_m =
       pinhole ? std::max(centre_z, m.radius) / camera.K(0, 0) : camera.pixel_size_m;
-  auto resolution_for = [&](double extent_m, int max_res) {
-    // A non-finite ratio (degenerate camera) takes the largest map.
-    const double texels = std::ceil(vo.light_texels_per_pixel * extent_m / pixel_m);
-    return int(std::clamp(std::isfinite(texels) ? texels : double(max_res),
-                          double(std::min(vo.min_light_resolution, max_res)), double(max_res)));
-  };
-  uint32_t views = 0;
-  int res = 0;
-  if (point_light) {
-    const Vec3d to_centre = m.centre - light_in_object;
-    const double dist = to_centre.norm();
-    if (dist > kFitMargin * m.radius) {
-      const Vec3d forward = to_centre / dist;
-      Vec3d right, up;
-      Basis(forward, &right, &up);
-      const double tan_half = std::tan(std::asin(m.radius / dist)) * kSphereInflation;
-      // Near plane at the sphere, but at least 1e-3 of the distance (float depth precision).
-      const double f_near = std::max(dist - m.radius, dist * 1e-3) / kSphereInflation;
-      const double f_far = (dist + m.radius) * kSphereInflation;
-      res = resolution_for(2 * dist * tan_half, vo.max_light_resolution);
-      p.views[0] = PerspectiveView(light_in_object, forward, right, up, tan_half, f_near, f_far);
-      views = 1;
-      m.stats.light_map = "fitted";
-    } else {
-      const double c_far = (dist + m.radius) * kSphereInflation;
-      const double c_near = m.radius * kCubeNearFraction;
-      res = resolution_for(2 * std::max(dist, m.radius), vo.max_cube_resolution);
-      for (int face = 0; face < 6; ++face) {
-        const int axis = face / 2;
-        const double sign = face % 2 == 0 ? 1 : -1;
-        Vec3d forward = Vec3d::Zero(), right = Vec3d::Zero(), up = Vec3d::Zero();
-        forward[axis] = sign;
-        right[(axis + 1) % 3] = 1;
-        up[(axis + 2) % 3] = 1;
-        p.views[face] = PerspectiveView(light_in_object, forward, right, up, 1.0, c_near, c_far);
-      }
-      views = 6;
-      m.stats.light_map = "cube";
-    }
-  } else {
-    const Vec3d forward = -light_dir_in_object;
-    Vec3d right, up;
-    Basis(forward, &right, &up);
-    const double half = m.radius * kSphereInflation;
-    const Vec3d origin = m.centre - forward * (half * kSphereInflation);
-    res = resolution_for(2 * half, vo.max_light_resolution);
-    p.views[0] = OrthographicView(origin, forward, right, up, half,
-                                  2 * half * kSphereInflation * kSphereInflation);
-    views = 1;
-    m.stats.light_map = "orthographic";
-  }
+  gpu::LightMapResolution resolution;
+  resolution.texels_per_pixel = vo.light_texels_per_pixel;
+  resolution.pixel_m = pixel_m;
+  resolution.min_resolution = vo.min_light_resolution;
+  resolution.max_resolution = vo.max_light_resolution;
+  resolution.max_cube_resolution = vo.max_cube_resolution;
+  REFLCAP_ASSIGN_OR_RETURN(
+      const gpu::LightMapPlan plan,
+      gpu::PlanLightMap(point_light, light_in_object, light_dir_in_object, m.centre, m.radius,
+                        gpu::LightMapShape::kAuto, resolution));
+  std::copy(plan.views, plan.views + plan.view_count, p.views);
+  const uint32_t views = plan.view_count;
+  const int res = plan.resolution;
+  m.stats.light_map = plan.kind;
   p.num_light_views = views;
   p.light_resolution = uint32_t(res);
   m.stats.light_resolution = res;
@@ -653,15 +495,14 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.pixels, pixel_bytes));
   std::memcpy(m.pixels->mapped(), pixels.data.data(), pixel_bytes);
   std::memcpy(m.params->mapped(), &p, sizeof(p));
-  REFLCAP_RETURN_IF_ERROR(m.EnsureLightTarget(uint32_t(res), views));
+  REFLCAP_RETURN_IF_ERROR(m.light_pass.EnsureTarget(ctx, uint32_t(res), views));
   REFLCAP_RETURN_IF_ERROR(m.EnsureCameraTarget(p.map_width, p.map_height));
   constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-  m.light_set.WriteBuffer(kBindParams, *m.params);
-  m.light_set.WriteBuffer(kBindCorners, *m.corners);
+  m.light_pass.WriteBuffers(*m.params, *m.corners);
   m.camera_set.WriteBuffer(kBindParams, *m.params);
   m.camera_set.WriteBuffer(kBindCorners, *m.corners);
   m.camera_set.WriteBuffer(kBindTriangles, *m.triangle_normals);
-  m.camera_set.WriteImage(kBindLightMap, m.light_target->depth->array_view(), m.sampler.handle(),
+  m.camera_set.WriteImage(kBindLightMap, m.light_pass.depth().array_view(), m.sampler.handle(),
                           kRead);
   const Buffer& rays = pinhole ? *grid->rays : *m.no_rays;
   for (size_t c = 0; c < m.texel_sets.size(); ++c) {
@@ -669,8 +510,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
     const uint64_t count = std::min<uint64_t>(m.chunk_texels, m.texel_count - first);
     DescriptorSet& set = m.texel_sets[c];
     set.WriteBuffer(kBindParams, *m.params);
-    set.WriteImage(kBindLightMap, m.light_target->depth->array_view(), m.sampler.handle(), kRead);
-    set.WriteImage(kBindCameraMap, m.camera_target->color->array_view(), m.sampler.handle(),
+    set.WriteImage(kBindLightMap, m.light_pass.depth().array_view(), m.sampler.handle(), kRead);
+    set.WriteImage(kBindCameraMap, m.camera_target->colors[0]->array_view(), m.sampler.handle(),
                    kRead);
     set.WriteBuffer(kBindTexels, *m.texels, first * sizeof(sh::MaskTexel),
                     count * sizeof(sh::MaskTexel));
@@ -686,11 +527,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   // Record: light views, camera map, texels, (camera map read-back).
   REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
   VkCommandBuffer cb = m.cmd.handle();
-  for (uint32_t v = 0; v < views; ++v) {
-    m.light_target->target.Begin(cb, v, {}, 1.0f);  // 1: nothing before the distance scale
-    m.Draw(m.light_pipeline, m.light_set, v);
-    m.light_target->target.End(cb);
-  }
+  m.light_pass.Record(cb, views, m.triangle_count);
   m.camera_target->target.Begin(cb, 0, {});  // colour 0: background (no hit)
   m.Draw(m.camera_pipeline, m.camera_set, sh::kMaskCameraView);
   m.camera_target->target.End(cb);
@@ -703,7 +540,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   }
   if (map != nullptr) {
     REFLCAP_RETURN_IF_ERROR(
-        gpu::RecordCopyImageToBuffer(m.cmd, *m.camera_target->color, 0, *m.map_readback, 0));
+        gpu::RecordCopyImageToBuffer(m.cmd, *m.camera_target->colors[0], 0, *m.map_readback, 0));
   }
   REFLCAP_RETURN_IF_ERROR(m.cmd.SubmitAndWait());
   m.stats.gpu_seconds = m.cmd.last_submit_wall_s();

@@ -22,6 +22,12 @@
 
 namespace reflcap::gpu {
 
+// Short names for the binding lists of DescriptorSetLayout::Create.
+constexpr VkDescriptorType kSsbo = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+constexpr VkDescriptorType kTex = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+constexpr VkShaderStageFlags kGfx = VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT;
+constexpr VkShaderStageFlags kComp = VK_SHADER_STAGE_COMPUTE_BIT;
+
 struct DescriptorBinding {
   uint32_t binding = 0;
   VkDescriptorType type = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;

@@ -13,6 +13,7 @@
 
 #include "engine/gpu/vk_buffer.h"
 #include "engine/gpu/vk_commands.h"
+#include "engine/gpu/depth_pass.h"
 #include "engine/gpu/vk_context.h"
 #include "engine/gpu/vk_descriptors.h"
 #include "engine/gpu/vk_graphics_pipeline.h"
@@ -30,6 +31,10 @@ using gpu::DescriptorBinding;
 using gpu::DescriptorSet;
 using gpu::DescriptorSetLayout;
 using gpu::DeviceImage;
+using gpu::kComp;
+using gpu::kGfx;
+using gpu::kSsbo;
+using gpu::kTex;
 using gpu::MemoryKind;
 using gpu::Pipeline;
 using gpu::RenderTarget;
@@ -48,125 +53,18 @@ constexpr int kVisibilityMargin = 2;
 // distortion is too strong for an undistorted pinhole render (fisheye lenses).
 constexpr int kMaxVisibilitySide = 16384;
 constexpr double kMaxVisibilityRatio = 8;
-// Bounding-sphere radius inflation: geometry exactly on the sphere stays inside every frustum.
-constexpr double kSphereInflation = 1.01;
-// Cube-map near plane relative to the bounding radius: occluders closer to a point light than
-// this are clipped (a light that close to a surface is outside any real rig).
-constexpr double kCubeNearFraction = 1e-3;
-
-// Camera near plane, as a fraction of the far plane, when the camera is inside the object's
-// bounding sphere: keeps float depth usable (geometry nearer than that is clipped).
-constexpr double kMinNearFraction = 1e-4;
-
-constexpr VkImageUsageFlags kAttachmentSampled =
-    VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_SAMPLED_BIT;
-
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-using gpu::Basis;
 using gpu::Homogeneous;
+using gpu::kSphereInflation;
+using gpu::MakePassTarget;
+using gpu::PassTarget;
 using gpu::OrthoClipFromCam;
 using gpu::PinholeClipFromCam;
 using gpu::SetRows;
 using gpu::V4;
-
-// A shadow view (render_params.h ShadowView) looking along `forward` from `origin`.
-sh::ShadowView PerspectiveView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
-                               const Vec3d& up, double tan_half, double near, double far) {
-  sh::ShadowView v{};
-  Mat4d view = Mat4d::Identity();  // (right, up, forward) coordinates of p - origin
-  view.block<1, 3>(0, 0) = right.transpose();
-  view.block<1, 3>(1, 0) = up.transpose();
-  view.block<1, 3>(2, 0) = forward.transpose();
-  view.block<3, 1>(0, 3) = -(view.topLeftCorner<3, 3>() * origin);
-  Mat4d proj = Mat4d::Zero();
-  proj(0, 0) = 1 / tan_half;
-  proj(1, 1) = 1 / tan_half;
-  proj(2, 2) = far / (far - near);
-  proj(2, 3) = -far * near / (far - near);
-  proj(3, 2) = 1;
-  SetRows(proj * view, v.clip_from_object);
-  v.origin = V4(origin, 1);
-  // Distance scale: the longest ray inside the frustum (to a far corner).
-  v.forward = V4(forward, far * std::sqrt(1 + 2 * tan_half * tan_half));
-  v.right = V4(right, tan_half);
-  v.up = V4(up, tan_half);
-  return v;
-}
-
-sh::ShadowView OrthographicView(const Vec3d& origin, const Vec3d& forward, const Vec3d& right,
-                                const Vec3d& up, double half_width, double depth) {
-  sh::ShadowView v{};
-  Mat4d view = Mat4d::Identity();
-  view.block<1, 3>(0, 0) = right.transpose();
-  view.block<1, 3>(1, 0) = up.transpose();
-  view.block<1, 3>(2, 0) = forward.transpose();
-  view.block<3, 1>(0, 3) = -(view.topLeftCorner<3, 3>() * origin);
-  Mat4d proj = Mat4d::Zero();
-  proj(0, 0) = 1 / half_width;
-  proj(1, 1) = 1 / half_width;
-  proj(2, 2) = 1 / depth;
-  proj(3, 3) = 1;
-  SetRows(proj * view, v.clip_from_object);
-  v.origin = V4(origin, 0);
-  v.forward = V4(forward, depth);  // distance scale: the box's depth
-  v.right = V4(right, half_width);
-  v.up = V4(up, half_width);
-  return v;
-}
-
-// Images and the render target of one pass, recreated when the size changes. Held by pointer so
-// the RenderTarget's image addresses stay valid.
-struct PassTarget {
-  std::vector<std::unique_ptr<DeviceImage>> colors;
-  std::unique_ptr<DeviceImage> depth;
-  RenderTarget target;
-  uint32_t width = 0, height = 0, layers = 0;
-};
-
-// A pass target of `color_formats` attachments and a D32 depth attachment; a sampled depth
-// (shadow maps) ends in SHADER_READ_ONLY_OPTIMAL.
-StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(gpu::VkContext& ctx, uint32_t w, uint32_t h,
-                                                     uint32_t layers,
-                                                     const std::vector<VkFormat>& color_formats,
-                                                     VkImageLayout final_layout,
-                                                     bool sampled_depth = false) {
-  auto t = std::make_unique<PassTarget>();
-  t->width = w;
-  t->height = h;
-  t->layers = layers;
-  std::vector<DeviceImage*> colors;
-  for (VkFormat f : color_formats) {
-    gpu::ImageOptions o;
-    o.width = w;
-    o.height = h;
-    o.layers = layers;
-    o.format = f;
-    o.usage = kAttachmentSampled;
-    o.cube_compatible = layers == 6 && w == h;
-    REFLCAP_ASSIGN_OR_RETURN(DeviceImage img, DeviceImage::Create(ctx, o));
-    t->colors.push_back(std::make_unique<DeviceImage>(std::move(img)));
-    colors.push_back(t->colors.back().get());
-  }
-  gpu::ImageOptions d;
-  d.width = w;
-  d.height = h;
-  d.layers = layers;
-  d.format = VK_FORMAT_D32_SFLOAT;
-  d.usage = VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT |
-            (sampled_depth ? VkImageUsageFlags{VK_IMAGE_USAGE_SAMPLED_BIT} : VkImageUsageFlags{0});
-  d.cube_compatible = layers == 6 && w == h;
-  REFLCAP_ASSIGN_OR_RETURN(DeviceImage depth, DeviceImage::Create(ctx, d));
-  t->depth = std::make_unique<DeviceImage>(std::move(depth));
-  REFLCAP_ASSIGN_OR_RETURN(
-      t->target,
-      RenderTarget::Create(ctx, colors, t->depth.get(), final_layout,
-                           sampled_depth ? VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL
-                                         : VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL));
-  return t;
-}
 
 // Parameter i of channel c in BrdfParams::Channel's layout ([rho_d, Cx_0, Cy_0, Cz_0, n_0, ...]).
 float ParamAt(const brdf::BrdfParams& p, int c, int i) {
@@ -247,19 +145,9 @@ const char* ShadowMapKindName(ShadowMapKind kind) {
 }
 
 Status VulkanRenderOptions::Validate() const {
-  if (!(shadow_texels_per_pixel > 0 && shadow_texels_per_pixel <= 64)) {
-    return InvalidArgumentError("shadow_texels_per_pixel must be in (0, 64], got ",
-                                shadow_texels_per_pixel);
-  }
-  for (int r : {min_shadow_resolution, max_shadow_resolution, max_cube_resolution}) {
-    if (r < 16 || r > 16384) {
-      return InvalidArgumentError("shadow-map resolution bounds must be in [16, 16384], got ", r);
-    }
-  }
-  if (min_shadow_resolution > max_shadow_resolution) {
-    return InvalidArgumentError("min_shadow_resolution ", min_shadow_resolution,
-                                " exceeds max_shadow_resolution ", max_shadow_resolution);
-  }
+  REFLCAP_RETURN_IF_ERROR(gpu::ValidateLightMapResolution(
+      "shadow", shadow_texels_per_pixel, min_shadow_resolution, max_shadow_resolution,
+      max_cube_resolution));
   if (shadow_resolution < 0 || shadow_resolution > 16384) {
     return InvalidArgumentError("shadow_resolution must be in [0, 16384], got ", shadow_resolution);
   }
@@ -287,10 +175,11 @@ struct VulkanRenderer::Impl {
   gpu::Sampler sampler;
 
   // Descriptor set layouts and sets, one per pass.
-  DescriptorSetLayout shadow_layout, camera_layout, resolve_layout, downsample_layout,
+  gpu::LightMapPass shadow_pass;  // shadow maps; its set (params, corners) also serves visibility
+  DescriptorSetLayout camera_layout, resolve_layout, downsample_layout,
       normal_map_layout;
-  DescriptorSet shadow_set, camera_set, resolve_set, downsample_set, normal_map_set;
-  Pipeline shadow_pipeline, depth_pipeline, camera_pipeline, visibility_pipeline, resolve_pipeline,
+  DescriptorSet camera_set, resolve_set, downsample_set, normal_map_set;
+  Pipeline depth_pipeline, camera_pipeline, visibility_pipeline, resolve_pipeline,
       downsample_pipeline, normal_map_pipeline;
 
   // Per-image parameters (host-visible).
@@ -307,14 +196,13 @@ struct VulkanRenderer::Impl {
   double sphere_radius = 0;
   double surface_offset = 0;
   // Pass targets.
-  std::unique_ptr<PassTarget> shadow, camera, camera_hires, visibility;
+  std::unique_ptr<PassTarget> camera, camera_hires, visibility;
   // Outputs (host-visible): radiance (rgb, a = mask), aux, and the 1x pass radiance+mask when the
   // main pass is supersampled.
   std::unique_ptr<Buffer> out_radiance, out_aux, out_mask;
 
   Status Init(const VulkanRenderOptions& o);
   Status EnsureCameraPipelines();
-  Status EnsureShadowTarget(uint32_t res, uint32_t layers);
   Status EnsureTarget(std::unique_ptr<PassTarget>* target, uint32_t w, uint32_t h,
                       const std::vector<VkFormat>& formats, VkImageLayout final_layout);
   Status UploadMaterial(const TexelAtlas& atlas, const BrdfMaps& maps);
@@ -338,27 +226,13 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
   gpu::VkContext& c = *ctx;
   REFLCAP_ASSIGN_OR_RETURN(cmd, gpu::CommandBuffer::Create(c));
   REFLCAP_ASSIGN_OR_RETURN(sampler, gpu::Sampler::Create(c));
-  for (VkFormat f : {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_UINT}) {
-    if (!gpu::FormatSupports(
-            c, f, VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT)) {
-      return UnavailableError("Vulkan device ", c.info().name,
-                              " cannot render to and sample format ", int(f));
-    }
-  }
-  if (!gpu::FormatSupports(
-          c, VK_FORMAT_D32_SFLOAT,
-          VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT)) {
-    return UnavailableError("Vulkan device ", c.info().name,
-                            " cannot render to and sample a D32_SFLOAT depth image (shadow maps)");
-  }
+  REFLCAP_RETURN_IF_ERROR(gpu::CheckPassFormats(
+      c, {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_UINT}, "camera passes and shadow maps"));
 
-  constexpr VkDescriptorType kSsbo = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-  constexpr VkDescriptorType kTex = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-  constexpr VkShaderStageFlags kGfx = VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT;
-  constexpr VkShaderStageFlags kComp = VK_SHADER_STAGE_COMPUTE_BIT;
   REFLCAP_ASSIGN_OR_RETURN(
-      shadow_layout,
-      DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx}, {kBindCorners, kSsbo, kGfx}}));
+      shadow_pass, gpu::LightMapPass::Create(c, {gpu::ShaderId::kRenderShadowVert,
+                                                 gpu::ShaderId::kRenderShadowFrag, kBindParams,
+                                                 kBindCorners}));
   REFLCAP_ASSIGN_OR_RETURN(camera_layout,
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx},
                                                            {kBindCorners, kSsbo, kGfx},
@@ -385,7 +259,6 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
                                                            {kBindOutRadiance, kSsbo, kComp},
                                                            {kBindOutAux, kSsbo, kComp},
                                                            {kBindNormalMapTexels, kSsbo, kComp}}));
-  REFLCAP_ASSIGN_OR_RETURN(shadow_set, DescriptorSet::Create(c, shadow_layout));
   REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
   REFLCAP_ASSIGN_OR_RETURN(resolve_set, DescriptorSet::Create(c, resolve_layout));
   REFLCAP_ASSIGN_OR_RETURN(downsample_set, DescriptorSet::Create(c, downsample_layout));
@@ -425,24 +298,8 @@ Status VulkanRenderer::Impl::EnsureTarget(std::unique_ptr<PassTarget>* target, u
                                           VkImageLayout final_layout) {
   if (*target != nullptr && (*target)->width == w && (*target)->height == h) return OkStatus();
   target->reset();
-  REFLCAP_ASSIGN_OR_RETURN(*target, MakePassTarget(*ctx, w, h, 1, formats, final_layout));
-  return OkStatus();
-}
-
-Status VulkanRenderer::Impl::EnsureShadowTarget(uint32_t res, uint32_t layers) {
-  if (shadow != nullptr && shadow->width == res && shadow->layers == layers) return OkStatus();
-  shadow.reset();
-  REFLCAP_ASSIGN_OR_RETURN(
-      shadow, MakePassTarget(*ctx, res, res, layers, {}, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
-                             /*sampled_depth=*/true));
-  if (shadow_pipeline.handle() == VK_NULL_HANDLE) {
-    gpu::GraphicsPipelineOptions o;
-    o.vertex = gpu::ShaderId::kRenderShadowVert;
-    o.fragment = gpu::ShaderId::kRenderShadowFrag;
-    o.set_layout = shadow_layout.handle();
-    o.push_constant_bytes = sizeof(sh::ShadowPush);
-    REFLCAP_ASSIGN_OR_RETURN(shadow_pipeline, Pipeline::CreateGraphics(*ctx, o, shadow->target));
-  }
+  REFLCAP_ASSIGN_OR_RETURN(*target,
+                           MakePassTarget(*ctx, w, h, 1, formats, final_layout, false));
   return OkStatus();
 }
 
@@ -465,7 +322,7 @@ Status VulkanRenderer::Impl::EnsureCameraPipelines() {
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kRenderSurfaceVert;
     o.fragment = gpu::ShaderId::kRenderVisibilityFrag;
-    o.set_layout = shadow_layout.handle();  // params + corners
+    o.set_layout = shadow_pass.layout().handle();  // params + corners
     REFLCAP_ASSIGN_OR_RETURN(visibility_pipeline,
                              Pipeline::CreateGraphics(*ctx, o, visibility->target));
   }
@@ -708,13 +565,8 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   const double centre_z = (cam_from_object * centre).z();
   // Depth range of the object in front of the camera (pinhole: beyond a sliver in front of the
   // centre; orthographic: rays start on the plane z = 0, as the CPU's do).
-  double near = pinhole ? std::max(centre_z - radius, (centre_z + radius) * kMinNearFraction)
-                        : std::max(0.0, centre_z - radius);
-  double far = centre_z + radius;
-  if (!(far > 0) || !(far > near)) {
-    near = 1e-3;
-    far = 1.0;  // the object is behind the camera: every pixel is background
-  }
+  double near = 0, far = 0;
+  gpu::CameraDepthRange(pinhole, centre_z, radius, &near, &far);
 
   sh::RenderParams p{};
   const double fx = camera.K(0, 0), fy = camera.K(1, 1), s = camera.K(0, 1), cx = camera.K(0, 2),
@@ -755,64 +607,27 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   // Shadow views.
   const VulkanRenderOptions& vo = m.options;
   const double pixel_m = pinhole ? std::max(centre_z, radius) / fx : camera.pixel_size_m;
-  auto resolution_for = [&](double extent_m, int max_res) {
-    if (vo.shadow_resolution > 0) return vo.shadow_resolution;
-    const double texels = std::ceil(vo.shadow_texels_per_pixel * extent_m / pixel_m);
-    return int(
-        std::clamp(texels, double(std::min(vo.min_shadow_resolution, max_res)), double(max_res)));
-  };
+  gpu::LightMapResolution resolution;
+  resolution.texels_per_pixel = vo.shadow_texels_per_pixel;
+  resolution.pixel_m = pixel_m;
+  resolution.min_resolution = vo.min_shadow_resolution;
+  resolution.max_resolution = vo.max_shadow_resolution;
+  resolution.max_cube_resolution = vo.max_cube_resolution;
+  resolution.fixed = vo.shadow_resolution;
   uint32_t views = 0;
   int res = 0;
   if (options.cast_shadows) {
-    if (point_light) {
-      const Vec3d to_centre = centre - light_in_object;
-      const double dist = to_centre.norm();
-      const bool fitted = vo.shadow_map == ShadowMapKind::kFitted ||
-                          (vo.shadow_map == ShadowMapKind::kAuto && dist > kFitMargin * radius);
-      if (fitted) {
-        if (!(dist > radius)) {
-          return InvalidArgumentError(
-              "a fitted shadow frustum needs the light outside the object's "
-              "bounding sphere; use the cube map");
-        }
-        const Vec3d forward = to_centre / dist;
-        Vec3d right, up;
-        Basis(forward, &right, &up);
-        const double tan_half = std::tan(std::asin(radius / dist)) * kSphereInflation;
-        const double f_near = std::max(dist - radius, dist * 1e-3) / kSphereInflation;
-        const double f_far = (dist + radius) * kSphereInflation;
-        res = resolution_for(2 * dist * tan_half, vo.max_shadow_resolution);
-        p.views[0] = PerspectiveView(light_in_object, forward, right, up, tan_half, f_near, f_far);
-        views = 1;
-        m.stats.shadow_map = "fitted";
-      } else {
-        const double c_far = (dist + radius) * kSphereInflation;
-        const double c_near = radius * kCubeNearFraction;
-        res = resolution_for(2 * std::max(dist, radius), vo.max_cube_resolution);
-        for (int face = 0; face < 6; ++face) {
-          const int axis = face / 2;
-          const double sign = face % 2 == 0 ? 1 : -1;
-          Vec3d forward = Vec3d::Zero(), right = Vec3d::Zero(), up = Vec3d::Zero();
-          forward[axis] = sign;
-          right[(axis + 1) % 3] = 1;
-          up[(axis + 2) % 3] = 1;
-          p.views[face] = PerspectiveView(light_in_object, forward, right, up, 1.0, c_near, c_far);
-        }
-        views = 6;
-        m.stats.shadow_map = "cube";
-      }
-    } else {
-      const Vec3d forward = -light_dir_in_object;
-      Vec3d right, up;
-      Basis(forward, &right, &up);
-      const double half = radius * kSphereInflation;
-      const Vec3d origin = centre - forward * (half * kSphereInflation);
-      res = resolution_for(2 * half, vo.max_shadow_resolution);
-      p.views[0] = OrthographicView(origin, forward, right, up, half,
-                                    2 * half * kSphereInflation * kSphereInflation);
-      views = 1;
-      m.stats.shadow_map = "orthographic";
-    }
+    gpu::LightMapShape shape = gpu::LightMapShape::kAuto;
+    if (vo.shadow_map == ShadowMapKind::kCube) shape = gpu::LightMapShape::kCube;
+    if (vo.shadow_map == ShadowMapKind::kFitted) shape = gpu::LightMapShape::kFitted;
+    REFLCAP_ASSIGN_OR_RETURN(
+        const gpu::LightMapPlan plan,
+        gpu::PlanLightMap(point_light, light_in_object, light_dir_in_object, centre, radius, shape,
+                          resolution));
+    std::copy(plan.views, plan.views + plan.view_count, p.views);
+    views = plan.view_count;
+    res = plan.resolution;
+    m.stats.shadow_map = plan.kind;
     p.flags |= sh::kRenderFlagCastShadows;
     m.stats.shadow_resolution = res;
   }
@@ -875,7 +690,7 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   }
 
   // Targets, outputs and descriptor sets (rewritten only here, between submissions).
-  if (views > 0) REFLCAP_RETURN_IF_ERROR(m.EnsureShadowTarget(uint32_t(res), views));
+  if (views > 0) REFLCAP_RETURN_IF_ERROR(m.shadow_pass.EnsureTarget(ctx, uint32_t(res), views));
   const uint64_t out_bytes = uint64_t(w) * h * 16;
   REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_radiance, out_bytes));
   REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_aux, out_bytes));
@@ -902,10 +717,9 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
     }
   }
   REFLCAP_RETURN_IF_ERROR(m.EnsureCameraPipelines());
-  const DeviceImage& shadow_image = views > 0 ? *m.shadow->depth : *m.dummy_shadow;
+  const DeviceImage& shadow_image = views > 0 ? m.shadow_pass.depth() : *m.dummy_shadow;
   constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-  m.shadow_set.WriteBuffer(kBindParams, *m.params);
-  m.shadow_set.WriteBuffer(kBindCorners, *m.corners);
+  m.shadow_pass.WriteBuffers(*m.params, *m.corners);
   for (DescriptorSet* set : {&m.camera_set, &m.resolve_set}) {
     set->WriteBuffer(kBindParams, *m.params);
     set->WriteBuffer(kBindCorners, *m.corners);
@@ -935,17 +749,10 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   // supersampled pass needs its own projection and weight, so it runs in a second submission.
   REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
   VkCommandBuffer cb = m.cmd.handle();
-  if (views > 0) {
-    for (uint32_t v = 0; v < views; ++v) {
-      m.shadow->target.Begin(cb, v, {}, 1.0f);  // 1: nothing before the distance scale
-      const sh::ShadowPush push{v};
-      m.Draw(m.shadow_pipeline, m.shadow_set, &push, sizeof(push));
-      m.shadow->target.End(cb);
-    }
-  }
+  if (views > 0) m.shadow_pass.Record(cb, views, m.triangle_count);
   if (distorted) {
     m.visibility->target.Begin(cb, 0, {});
-    m.Draw(m.visibility_pipeline, m.shadow_set, nullptr, 0);
+    m.Draw(m.visibility_pipeline, m.shadow_pass.set(), nullptr, 0);
     m.visibility->target.End(cb);
     m.resolve_pipeline.Bind(cb, m.resolve_set.handle());
     vkCmdDispatch(cb, (uint32_t(w) + kTile - 1) / kTile, (uint32_t(h) + kTile - 1) / kTile, 1);

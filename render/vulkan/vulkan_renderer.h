@@ -61,8 +61,8 @@ namespace reflcap::render {
 
 // Which shadow map a point light gets.
 enum class ShadowMapKind {
-  kAuto,    // kFitted when the light is outside the object's bounding sphere (by kFitMargin),
-            // else kCube
+  kAuto,    // kFitted when the light is outside the object's bounding sphere (by
+            // gpu::kFitMargin, engine/gpu/depth_pass.h), else kCube
   kCube,    // six 90° faces around the light
   kFitted,  // one perspective frustum around the bounding sphere (light must be outside it)
 };
@@ -99,9 +99,6 @@ struct VulkanRenderOptions {
 
   Status Validate() const;
 };
-
-// kAuto picks kFitted when |light - centre| > kFitMargin * radius of the bounding sphere.
-constexpr double kFitMargin = 1.05;
 
 // What the last RenderImage did (for reports and benchmarks).
 struct VulkanRenderStats {

@@ -2,7 +2,7 @@
 // six faces of a cube map for a point light — shared by the Vulkan renderer's InShadow
 // (shaders/render/shading.glsl, whose file comment explains the receiver-plane depth and the
 // slope-scaled bias) and the Vulkan masks' LightShadowed (shaders/resample/masks_common.glsl).
-// The two keep their own view structs (ShadowView, MaskView: the same 128-byte layout) and bias
+// Both hold their views as shared/light_map_view.h's LightMapView, keep their own bias
 // parameters, and pass the fields here.
 #ifndef REFLCAP_SHADERS_COMMON_LIGHT_MAP_GLSL_
 #define REFLCAP_SHADERS_COMMON_LIGHT_MAP_GLSL_
@@ -24,7 +24,7 @@ int LightMapViewOf(vec3 p, vec3 light, uint num_views) {
 }
 
 // Whether p (geometric normal n_g, facing the light), at clip position `clip` in light-map view
-// `view` (layer of `map`; origin, forward, right, up as in ShadowView / MaskView), is in cast
+// `view` (layer of `map`; origin, forward, right, up as in LightMapView), is in cast
 // shadow: stored distance < t_plane - bias, bias = bias.x + bias.y * footprint *
 // (1 + min(tan θ, kMaxLightMapSlope)), t_plane at most bias.z footprints behind p.
 bool LightMapShadowed(sampler2DArray map, int view, vec4 clip, vec4 origin4, vec4 forward,

@@ -9,8 +9,8 @@
 //                                         (REFLCAP_RENDER_SHADING, REFLCAP_RENDER_MATERIAL)
 //   4  frame: sampler2DArray, atlas layout, RGBA32F: xyz the texel's unit tangent, w 1 where
 //      the pixel is a texel, 0 elsewhere  (REFLCAP_RENDER_SHADING)
-//   5  shadow map: sampler2DArray of the D32 depth image, one layer per ShadowView, holding
-//      distance / ShadowView.forward.w (REFLCAP_RENDER_SHADING)
+//   5  shadow map: sampler2DArray of the D32 depth image, one layer per LightMapView, holding
+//      distance / LightMapView.forward.w (REFLCAP_RENDER_SHADING)
 // Bindings 6 and up belong to single passes and are declared there.
 #ifndef REFLCAP_SHADERS_RENDER_RENDER_INPUTS_GLSL_
 #define REFLCAP_SHADERS_RENDER_RENDER_INPUTS_GLSL_

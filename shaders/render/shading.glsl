@@ -7,7 +7,7 @@
 // shadow" is the shadow-map test InShadow below instead of an occlusion ray.
 //
 // Shadow test (InShadow). The map stores, per texel, the distance from the view's origin along the
-// texel's ray to the nearest surface (shared/render_params.h, ShadowView). A point p with geometric
+// texel's ray to the nearest surface (shared/light_map_view.h). A point p with geometric
 // normal n_g is compared not with its own distance but with t_plane, where the texel's ray meets
 // the plane through p with normal n_g ("receiver-plane" depth): for a planar receiver that is
 // exactly the distance the map holds where the receiver itself is nearest, so a lit plane cannot
@@ -83,7 +83,7 @@ bool TexelOfHit(vec2 uv, out ivec2 texel) {
 // Whether p (geometric normal n_g, facing the light) is in shadow; see the file comment.
 bool InShadow(vec3 p, vec3 n_g) {
   int v = LightMapViewOf(p, params.light.xyz, params.num_shadow_views);
-  ShadowView view = params.views[v];
+  LightMapView view = params.views[v];
   vec4 clip = TransformRows(view.clip_from_object, p);
   return LightMapShadowed(shadow_map, v, clip, view.origin, view.forward, view.right, view.up,
                           params.shadow_resolution, p, n_g, params.shadow_bias.xyz);

@@ -18,7 +18,7 @@ layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 
 void main() {
-  MaskView view = params.views[push.view];
+  LightMapView view = params.views[push.view];
   vec3 d = in_position - view.origin.xyz;
   float distance = view.origin.w > 0.5 ? length(d) : dot(d, view.forward.xyz);
   // [0, 1] is the depth attachment's range; the host puts every surface inside it.

@@ -67,7 +67,7 @@ vec3 ToLight(vec3 p, out float dist) {
 // Whether p (geometric normal n_g, facing the light) lies in cast shadow; see the file comment.
 bool LightShadowed(vec3 p, vec3 n_g) {
   int v = LightMapViewOf(p, params.light.xyz, params.num_light_views);
-  MaskView view = params.views[v];
+  LightMapView view = params.views[v];
   vec4 clip = MaskTransformRows(view.clip_from_object, p);
   return LightMapShadowed(light_map, v, clip, view.origin, view.forward, view.right, view.up,
                           params.light_resolution, p, n_g,

@@ -6,6 +6,7 @@
 #define REFLCAP_SHADERS_SHARED_RENDER_PARAMS_H_
 
 #include "interop.h"
+#include "light_map_view.h"
 
 REFLCAP_SHARED_BEGIN
 
@@ -20,23 +21,9 @@ REFLCAP_CONST(int, kMaxShadowViews, 6);
 // floats, 4 per RGBA layer.
 REFLCAP_CONST(int, kMaxMaterialLayers, 10);
 
-// One shadow-map view (a 2-D layer of the shadow map): the light's perspective (point light; the
-// six faces of a cube map, or one frustum fitted to the object) or orthographic (directional)
-// projection. The map stores, per texel, the distance from `origin` along the texel's ray to the
-// nearest surface — |x - origin| for perspective views, (x - origin) . forward for orthographic
-// ones — divided by forward.w. The texel at NDC (xc, yc) has the ray
-//   perspective:  origin, direction normalize(forward + xc right.w right + yc up.w up)
-//   orthographic: origin + xc right.w right + yc up.w up, direction forward.
-struct ShadowView {
-  vec4 clip_from_object[4];  // rows of the 4x4 projection (object frame -> clip), Vulkan depth
-  vec4 origin;               // xyz: light position / centre of the orthographic near plane; w: 1
-                             // perspective, 0 orthographic
-  vec4 forward;              // xyz: unit viewing direction; w: distance scale (m): the map
-                             // stores distance / scale in [0, 1] (scale beyond every surface)
-  vec4 right;                // xyz: unit NDC +x axis; w: tan(half-angle) or half-width (m)
-  vec4 up;                   // xyz: unit NDC +y axis; w: tan(half-angle) or half-height (m)
-};
-REFLCAP_STD430_SIZE(ShadowView, 128);
+// The shadow map holds one LightMapView (light_map_view.h) per layer: the light's perspective
+// (point light: the six faces of a cube map, or one frustum fitted to the object) or
+// orthographic (directional) projection.
 
 struct RenderParams {
   vec4 clip_from_object[4];  // camera projection (rows), object frame -> clip; Vulkan depth [0,1]
@@ -66,7 +53,7 @@ struct RenderParams {
   uint vis_height;
   uint supersampling;        // N: N x N samples per pixel in the resolve
   uint params_per_channel;   // ParamsPerChannel(num_lobes)
-  ShadowView views[kMaxShadowViews];
+  LightMapView views[kMaxShadowViews];
 };
 REFLCAP_STD430_OFFSET(RenderParams, camera_origin, 64);
 REFLCAP_STD430_OFFSET(RenderParams, light, 144);
@@ -95,11 +82,7 @@ struct RenderTriangle {
 };
 REFLCAP_STD430_SIZE(RenderTriangle, 32);
 
-// Push constants of the shadow pass: which view to draw.
-struct ShadowPush {
-  uint view;
-};
-REFLCAP_STD430_SIZE(ShadowPush, 4);
+// The shadow pass pushes a LightMapPush (light_map_view.h).
 
 // Push constants of the supersampling box filter.
 struct DownsamplePush {

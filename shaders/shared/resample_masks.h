@@ -7,6 +7,7 @@
 #define REFLCAP_SHADERS_SHARED_RESAMPLE_MASKS_H_
 
 #include "interop.h"
+#include "light_map_view.h"
 
 REFLCAP_SHARED_BEGIN
 
@@ -35,22 +36,9 @@ REFLCAP_CONST(uint, kMaskInvalid, 8u);
 REFLCAP_CONST(uint, kMaskClipped, 9u);
 REFLCAP_CONST(uint, kMaskDark, 10u);
 
-// One light-map view (a 2-D layer of the light map): the light's perspective projection (point
-// light: a cube face, or one frustum fitted to the object) or an orthographic box (directional).
-// The map stores, per texel, the distance from `origin` along the texel's ray to the nearest
-// surface — |x - origin| (perspective) or (x - origin) . forward (orthographic) — divided by
-// forward.w. The texel at NDC (xc, yc) has the ray
-//   perspective:  origin, direction normalize(forward + xc right.w right + yc up.w up)
-//   orthographic: origin + xc right.w right + yc up.w up, direction forward.
-struct MaskView {
-  vec4 clip_from_object[4];  // rows of the 4x4 projection (object frame -> clip), Vulkan depth
-  vec4 origin;               // xyz: light position / centre of the box's near plane; w: 1
-                             // perspective, 0 orthographic
-  vec4 forward;              // xyz: unit viewing direction; w: distance scale (m)
-  vec4 right;                // xyz: unit NDC +x axis; w: tan(half-angle) or half-width (m)
-  vec4 up;                   // xyz: unit NDC +y axis; w: tan(half-angle) or half-height (m)
-};
-REFLCAP_STD430_SIZE(MaskView, 128);
+// The light map holds one LightMapView (light_map_view.h) per layer: the light's perspective
+// projection (point light: a cube face, or one frustum fitted to the object) or an orthographic
+// box (directional).
 
 struct MaskParams {
   vec4 camera_clip_from_object[4];  // camera-map projection (rows): object frame -> clip
@@ -82,7 +70,7 @@ struct MaskParams {
   uint light_resolution;            // light-map width = height, texels
   uint num_light_views;             // 1 or 6 (cube map)
   uint image_index;                 // written into every sample
-  MaskView views[kMaskMaxLightViews];
+  LightMapView views[kMaskMaxLightViews];
 };
 REFLCAP_STD430_OFFSET(MaskParams, cam_from_object, 64);
 REFLCAP_STD430_OFFSET(MaskParams, camera_centre, 160);
@@ -118,6 +106,7 @@ struct MaskSample {
 REFLCAP_STD430_SIZE(MaskSample, 48);
 
 // Push constants of the light and camera passes: which view to draw.
+// The light pass's draws push it as a LightMapPush (light_map_view.h: the same single uint).
 struct MaskDrawPush {
   uint view;  // 0 .. kMaskMaxLightViews - 1: light view; kMaskCameraView: the camera
 };

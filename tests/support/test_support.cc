@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <fstream>
 
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 
 #include "engine/core/atomic_file.h"
@@ -43,6 +44,28 @@ void WriteText(const fs::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;
   REFLCAP_CHECK(bool(out)) << "cannot write " << path;
+}
+
+namespace {
+
+class ReleaseEnvironment : public ::testing::Environment {
+ public:
+  explicit ReleaseEnvironment(std::function<void()> release) : release_(std::move(release)) {}
+  void TearDown() override {
+    if (release_) release_();
+    release_ = nullptr;
+  }
+
+ private:
+  std::function<void()> release_;
+};
+
+}  // namespace
+
+void ReleaseBeforeExit(std::function<void()> release) {
+  // gtest owns the environment; environments added while tests run are torn down (in reverse
+  // order of addition) with the others after the last test.
+  ::testing::AddGlobalTestEnvironment(new ReleaseEnvironment(std::move(release)));
 }
 
 }  // namespace reflcap::testing

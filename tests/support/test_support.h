@@ -1,6 +1,7 @@
 #pragma once
 // Helpers shared by reflcap's tests: scratch folders and the optional ../shared data.
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -26,6 +27,15 @@ std::optional<std::filesystem::path> SharedDataDir();
 
 // Writes `text` to `path` (creating parent folders); aborts the test process on failure.
 void WriteText(const std::filesystem::path& path, const std::string& text);
+
+// Runs `release` when the program's tests have finished — in a ::testing::Environment's
+// TearDown, inside RUN_ALL_TESTS — rather than among the static destructors. A binary-wide
+// Vulkan object (context, renderer, fitter) kept in a function-local static must be released
+// here: a driver loaded after that static was constructed registers its own exit handlers later,
+// so they run first, and a vkDestroy* from a static destructor then calls into a torn-down
+// driver (NVIDIA 580: SIGSEGV at exit whenever a single test ran alone, as ctest runs them;
+// lavapipe tolerates it). Releases run in the reverse order of registration.
+void ReleaseBeforeExit(std::function<void()> release);
 
 }  // namespace reflcap::testing
 

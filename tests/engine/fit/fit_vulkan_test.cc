@@ -41,6 +41,7 @@
 #include "shaders/shared/fit_probe.h"
 #include "tests/engine/fit/fit_hard_cases.h"
 #include "tests/engine/fit/fit_test_util.h"
+#include "tests/support/test_support.h"
 
 namespace reflcap::fit {
 namespace {
@@ -71,6 +72,8 @@ VulkanFitter& SharedVulkanFitter() {
   static std::unique_ptr<VulkanFitter> fitter = [] {
     auto created = CreateVulkanFitter(TestDevice());
     REFLCAP_CHECK(created.ok()) << created.status().ToString();
+    // Released after the last test, before static destructors (ReleaseBeforeExit says why).
+    reflcap::testing::ReleaseBeforeExit([] { fitter.reset(); });
     return std::move(created).value();
   }();
   return *fitter;

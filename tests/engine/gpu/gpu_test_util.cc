@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "engine/core/status.h"
+#include "tests/support/test_support.h"
 
 namespace reflcap::gpu::testing {
 
@@ -13,7 +14,7 @@ VkContext* SharedContext(std::string* skip_reason, std::string* error) {
     std::string skip_reason;
     std::string error;
   };
-  // Destroyed at exit, after every test has released its Vulkan objects.
+  // Released after the last test, before static destructors (ReleaseBeforeExit says why).
   static State* state = [] {
     static State storage;
     State* s = &storage;
@@ -35,6 +36,7 @@ VkContext* SharedContext(std::string* skip_reason, std::string* error) {
       return s;
     }
     s->ctx = std::move(ctx).value();
+    reflcap::testing::ReleaseBeforeExit([s] { s->ctx.reset(); });
     return s;
   }();
   *skip_reason = state->skip_reason;

@@ -57,37 +57,6 @@ const SynthCapture& Synth() {
   return *s;
 }
 
-// On failure: the pixels with the largest errors among those compared, with both renders' aux.
-void PrintWorstPixels(const RenderResult& cpu, const RenderResult& gpu, const Agreement& a,
-                      size_t count) {
-  struct Error {
-    double error;
-    int x, y;
-  };
-  std::vector<Error> errors;
-  for (int y = 0; y < cpu.pixels.height; ++y) {
-    for (int x = 0; x < cpu.pixels.width; ++x) {
-      if (a.excluded.at(x, y) > 0.5f) continue;
-      double e = 0;
-      for (int c = 0; c < 3; ++c) e += std::abs(cpu.pixels.at(x, y, c) - gpu.pixels.at(x, y, c));
-      if (e > 0) errors.push_back({e, x, y});
-    }
-  }
-  std::sort(errors.begin(), errors.end(),
-            [](const Error& p, const Error& q) { return p.error > q.error; });
-  for (size_t i = 0; i < std::min(count, errors.size()); ++i) {
-    const int x = errors[i].x, y = errors[i].y;
-    std::printf(
-        "    pixel %d,%d: R cpu %.5g vulkan %.5g; cast_shadow %g/%g cos_i %.4f/%.4f "
-        "cos_o %.4f/%.4f curvature %.3g/%.3g\n",
-        x, y, cpu.pixels.at(x, y, 0), gpu.pixels.at(x, y, 0), cpu.aux.at(x, y, kAuxCastShadow),
-        gpu.aux.at(x, y, kAuxCastShadow), cpu.aux.at(x, y, kAuxCosThetaI),
-        gpu.aux.at(x, y, kAuxCosThetaI), cpu.aux.at(x, y, kAuxCosThetaO),
-        gpu.aux.at(x, y, kAuxCosThetaO), cpu.aux.at(x, y, kAuxCurvature),
-        gpu.aux.at(x, y, kAuxCurvature));
-  }
-}
-
 // Renders every image of `fitted` (whose capture may have been modified) with both renderers and
 // returns the pooled agreement; each image must reach kMinPsnrDb on its own.
 Agreement CompareAllImages(VulkanRenderer& renderer, const FittedCapture& fitted,
@@ -103,7 +72,10 @@ Agreement CompareAllImages(VulkanRenderer& renderer, const FittedCapture& fitted
     if (!cpu.ok() || !gpu.ok()) return pooled;
     const Agreement a = Compare(*cpu, *gpu);
     EXPECT_GE(a.psnr_db, kMinPsnrDb) << label << ", image " << i << ": " << a.ToString();
-    if (a.psnr_db < kMinPsnrDb) PrintWorstPixels(*cpu, *gpu, a, 8);
+    if (a.psnr_db < kMinPsnrDb) {
+      testing::PrintWorstPixels(*cpu, *gpu, a, 8);
+      testing::DumpRenders(std::string(label) + "_image" + std::to_string(i), *cpu, *gpu);
+    }
     worst_psnr = std::min(worst_psnr, a.psnr_db);
     size_t shadowed = 0;
     for (int y = 0; y < cpu->aux.height; ++y) {

@@ -287,6 +287,11 @@ TEST_F(VulkanRendererScenes, SupersamplingMatchesCpu) {
       const Agreement a = Compare(*cpu, *gpu);
       std::printf("[ vulkan   ] supersampling %dx%d%s: %s\n", n, n, distorted ? " (distorted)" : "",
                   a.ToString().c_str());
+      if (a.psnr_db < kMinPsnrDb) {
+        testing::PrintWorstPixels(*cpu, *gpu, a, 8);
+        testing::DumpRenders("supersampling" + std::to_string(n) + (distorted ? "_distorted" : ""),
+                             *cpu, *gpu);
+      }
       EXPECT_GE(a.psnr_db, kMinPsnrDb) << n;
       EXPECT_EQ(a.mask_mismatches, 0u) << n;
     }
@@ -309,6 +314,10 @@ TEST_F(VulkanRendererScenes, OrthographicCameraMatchesCpu) {
     ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.status().ToString();
     const Agreement a = Compare(*cpu, *gpu);
     std::printf("[ vulkan   ] orthographic, %dx%d samples: %s\n", n, n, a.ToString().c_str());
+    if (a.psnr_db < kMinPsnrDb) {
+      testing::PrintWorstPixels(*cpu, *gpu, a, 8);
+      testing::DumpRenders("orthographic" + std::to_string(n), *cpu, *gpu);
+    }
     EXPECT_GE(a.psnr_db, kMinPsnrDb) << n;
     EXPECT_EQ(a.mask_mismatches, 0u) << n;
     EXPECT_GT(a.compared_pixels, 1500u) << n;

@@ -40,4 +40,13 @@ inline Agreement Compare(const RenderResult& cpu, const RenderResult& gpu,
 }
 constexpr double kMinPsnrDb = kMinAgreementPsnrDb;
 
+// On failure: the `count` compared pixels with the largest errors, with both renders' aux.
+void PrintWorstPixels(const RenderResult& cpu, const RenderResult& gpu, const Agreement& a,
+                      size_t count);
+
+// With $REFLCAP_TEST_DUMP_DIR set: writes both renders (radiance, mask, aux) as EXR files
+// `<label>_{cpu,vulkan}.exr` there, for looking at a disagreement found on a machine one cannot
+// debug on. Does nothing otherwise.
+void DumpRenders(const std::string& label, const RenderResult& cpu, const RenderResult& gpu);
+
 }  // namespace reflcap::render::testing

@@ -1,0 +1,132 @@
+// `reflcap render CAPTURE FIT --out DIR`: re-renders a capture's photographs from a fit's
+// parameter map with the CPU reference renderer (render/reference/render_capture.h) or, with
+// --backend vulkan, the Vulkan renderer (render/vulkan/vulkan_render_capture.h); both write the
+// same files.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+#include "cli/cli.h"
+#include "engine/capture/capture.h"
+#include "engine/core/atomic_file.h"
+#include "engine/core/progress.h"
+#include "render/reference/render_capture.h"
+#ifdef REFLCAP_HAVE_VULKAN_RENDERER
+#include "render/vulkan/vulkan_render_capture.h"
+#endif
+
+namespace reflcap::cli {
+namespace fs = std::filesystem;
+
+int RunRender(int argc, char** argv) {
+  std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
+  int supersample = 1;
+  bool no_shadows = false, overwrite = false;
+  ArgParser args(
+      "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
+      "Re-render the selected photographs of a capture from a fit: one float EXR per photograph\n"
+      "with the same relative name (images/0003.exr -> DIR/images/0003.exr), its object mask\n"
+      "(DIR/masks/0003.png) and validation buffers (DIR/aux/0003.exr: cast_shadow, cos_theta_i,\n"
+      "cos_theta_o, curvature, mask), and DIR/render_report.json. FIT/params.exr holds the\n"
+      "parameter maps in the capture's atlas layout (mesh: BuildTexelAtlas at params.exr's size;\n"
+      "normal map: the camera's pixels). A synthetic capture's gt/ folder is a valid FIT.\n"
+      "--backend vulkan rasterises on a Vulkan device (a GPU, or lavapipe on the CPU) and writes\n"
+      "the same files; render_report.json names the device.");
+  args.AddPositional("CAPTURE", &capture_path, "capture.json, or the folder holding it");
+  args.AddPositional("FIT", &fit, "fit folder holding params.exr (or the params.exr file itself)");
+  args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
+  args.AddString("split", &split, "S", "holdout (default), train or all");
+  args.AddString("backend", &backend, "B", "cpu (default) or vulkan");
+  args.AddString("device", &device, "NAME|INDEX",
+                 "Vulkan device: index or name substring (default: automatic; --backend vulkan)");
+  args.AddString("shadow-map", &shadow_map, "KIND",
+                 "Vulkan point-light shadow map: auto (default), cube or fitted");
+  args.AddInt("supersample", &supersample, "N x N samples per pixel, 1..16 (default 1); mesh captures");
+  args.AddFlag("no-shadows", &no_shadows, "do not trace shadow rays (mesh captures)");
+  args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
+  bool help = false;
+  if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
+    std::fprintf(stderr, "reflcap render: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s", args.Help().c_str());
+    return 0;
+  }
+  auto usage = [](const std::string& message) {
+    std::fprintf(stderr, "reflcap render: %s\n", message.c_str());
+    return kExitUsage;
+  };
+  if (out.empty()) return usage("--out DIR is required");
+  auto selection = render::ParseSplitSelection(split, "--split");
+  if (!selection.ok()) return usage(selection.status().message());
+  if (backend != "cpu" && backend != "vulkan") {
+    return usage("--backend: \"" + backend + "\" is not one of cpu, vulkan");
+  }
+  if (supersample < 1 || supersample > render::kMaxSupersampling) {
+    return usage(StrCat("--supersample must be in [1, ", render::kMaxSupersampling, "], got ", supersample));
+  }
+  if (!device.empty() && backend != "vulkan") return usage("--device needs --backend vulkan");
+  if (!shadow_map.empty() && backend != "vulkan") return usage("--shadow-map needs --backend vulkan");
+  if (!shadow_map.empty() && shadow_map != "auto" && shadow_map != "cube" && shadow_map != "fitted") {
+    return usage("--shadow-map: \"" + shadow_map + "\" is not one of auto, cube, fitted");
+  }
+  auto capture = ReadCapture(capture_path);
+  if (!capture.ok()) return ReportError("render", capture.status());
+  fs::path params = fit;
+  std::error_code ec;
+  if (fs::is_directory(params, ec)) params /= "params.exr";
+  if (!fs::is_regular_file(params, ec)) {
+    return ReportError("render", NotFoundError(params.string(), ": missing (FIT must hold params.exr)"));
+  }
+#ifdef REFLCAP_HAVE_VULKAN_RENDERER
+  std::unique_ptr<render::VulkanRenderer> renderer;
+  if (backend == "vulkan") {
+    render::VulkanRenderOptions vulkan_options;
+    if (shadow_map == "cube") vulkan_options.shadow_map = render::ShadowMapKind::kCube;
+    if (shadow_map == "fitted") vulkan_options.shadow_map = render::ShadowMapKind::kFitted;
+    auto created = render::VulkanRenderer::Create(device, vulkan_options);
+    if (!created.ok()) {
+      // A device that is missing, does not match --device or cannot run the renderer: the
+      // requested backend is unavailable (exit 3).
+      return ReportError("render", UnavailableError("--backend vulkan: ",
+                                                    created.status().message()));
+    }
+    renderer = std::move(created).value();
+  }
+#else
+  if (backend == "vulkan") {
+    return ReportError("render", UnavailableError("--backend vulkan: this build has no Vulkan "
+                                                  "support (REFLCAP_ENABLE_VULKAN=OFF); use "
+                                                  "--backend cpu"));
+  }
+#endif
+  auto staging = StagingDir::Create(out, overwrite);
+  if (!staging.ok()) return ReportError("render", staging.status());
+  render::CaptureRenderOptions options;
+  options.split = *selection;
+  options.supersampling = supersample;
+  options.cast_shadows = !no_shadows;
+  std::string device_name = "the cpu";
+  StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");
+#ifdef REFLCAP_HAVE_VULKAN_RENDERER
+  if (renderer != nullptr) {
+    device_name = renderer->device().name + " (Vulkan)";
+    summary = render::RenderCaptureVulkan(*capture, params, staging->path(), options, *renderer);
+  } else {
+    summary = render::RenderCapture(*capture, params, staging->path(), options);
+  }
+#else
+  summary = render::RenderCapture(*capture, params, staging->path(), options);
+#endif
+  if (!summary.ok()) return ReportError("render", summary.status());
+  if (Status s = staging->Commit(); !s.ok()) return ReportError("render", s);
+  std::printf("rendered %zu %s images (%zu texels, %d lobes) on %s in %s -> %s\n",
+              summary->images, render::SplitSelectionName(*selection), summary->texels,
+              summary->num_lobes, device_name.c_str(), FormatDuration(summary->total_s).c_str(),
+              out.c_str());
+  std::printf("next: reflcap validate %s %s --out REPORT\n", capture_path.c_str(), out.c_str());
+  return 0;
+}
+
+}  // namespace reflcap::cli

@@ -1,0 +1,110 @@
+// `reflcap resample CAPTURE --out SAMPLES`: photographs -> per-texel BRDF samples (sample store),
+// with resample_report.json and coverage maps. The output folder is staged and moved into place
+// only when complete.
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "cli/cli.h"
+#include "acquire/resample/resample.h"
+#include "engine/capture/capture.h"
+#include "engine/core/atomic_file.h"
+#include "engine/core/log.h"
+#include "engine/mesh/texel_atlas.h"
+
+namespace reflcap::cli {
+namespace fs = std::filesystem;
+
+int RunResample(int argc, char** argv) {
+  std::string capture_path, out, split = "train", backend = "cpu";
+  resample::ResampleOptions options;
+  bool overwrite = false;
+  // NaN = not given (the parser accepts only finite numbers).
+  double photon_sigma = std::nan(""), read_sigma = std::nan("");
+  ArgParser args(
+      "resample", "CAPTURE --out SAMPLES [options]",
+      "Project every selected photograph onto the object's texels and store, per texel, its BRDF\n"
+      "samples (light and view directions in the texel's tangent frame, radiance / irradiance,\n"
+      "noise weight). A sample is kept only when the texel is seen (not occluded) and lit (not in\n"
+      "cast shadow), neither direction is grazing, the pixel footprint does not straddle a\n"
+      "silhouette, depth or shadow boundary, and the pixel is finite, not clipped and above the\n"
+      "noise floor; every rejection is counted by reason in SAMPLES/resample_report.json, next to\n"
+      "coverage maps (coverage.exr/.png, domain.exr).");
+  args.AddPositional("CAPTURE", &capture_path, "capture.json, or the folder holding it");
+  args.AddString("out", &out, "SAMPLES", "output folder (must not exist or be empty)");
+  args.AddInt("atlas-res", &options.atlas_resolution,
+              StrCat("atlas resolution R (R x R) of a mesh capture (default: the capture's "
+                     "ground_truth.atlas size, else ", kDefaultAtlasResolution, ")"));
+  args.AddString("split", &split, "S", "photographs to use: train (default), holdout or all");
+  args.AddDouble("min-cos", &options.min_cos,
+                 StrCat("n.l and n.v must exceed this, in [0, 1) (default ",
+                        resample::kDefaultMinCos, " = cos 81.4 deg)"));
+  args.AddString("backend", &backend, "B",
+                 "cpu (default: Embree rays) or vulkan (visibility and cast shadow from depth maps "
+                 "rasterised by Vulkan; exit 3 without a Vulkan device)");
+  args.AddString("device", &options.device, "NAME|INDEX",
+                 "Vulkan device for --backend vulkan (default: automatic)");
+  args.AddFlag("cross-check", &options.cross_check,
+               "with --backend vulkan: also run the Embree tests and write their agreement with "
+               "the Vulkan masks as mask_agreement into resample_report.json");
+  args.AddDouble("noise-sigma", &photon_sigma,
+                 StrCat("photon noise std at pixel value 1 (default: the capture's "
+                        "ground_truth.noise, else ", resample::kDefaultPhotonSigma, ")"));
+  args.AddDouble("read-sigma", &read_sigma,
+                 StrCat("read noise std; the dark floor is 3x this (default: the capture's, else ",
+                        resample::kDefaultReadSigma, ")"));
+  args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
+  args.AddFlag("overwrite", &overwrite,
+               "replace SAMPLES if it exists (only once the new one is complete)");
+  bool help = false;
+  if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
+    std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s", args.Help().c_str());
+    return 0;
+  }
+  if (out.empty()) {
+    std::fprintf(stderr, "reflcap resample: --out SAMPLES is required\n");
+    return kExitUsage;
+  }
+  if (!std::isnan(photon_sigma)) options.photon_sigma = photon_sigma;
+  if (!std::isnan(read_sigma)) options.read_sigma = read_sigma;
+  auto parsed_split = resample::ParseSplit(split);
+  auto parsed_backend = resample::ParseBackend(backend);
+  for (const Status& s : {parsed_split.status(), parsed_backend.status()}) {
+    if (!s.ok()) {
+      std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
+      return kExitUsage;
+    }
+  }
+  options.split = *parsed_split;
+  options.backend = *parsed_backend;
+  if (Status s = options.Validate(); !s.ok()) {
+    std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (Status s = resample::BackendAvailable(options.backend, options.device); !s.ok()) {
+    return ReportError("resample", s);
+  }
+
+  // Read and check the whole capture before anything is created on disk.
+  auto capture = ReadCapture(capture_path);
+  if (!capture.ok()) return ReportError("resample", capture.status());
+  if (Status s = ValidateCaptureFiles(*capture, nullptr); !s.ok()) {
+    return ReportError("resample", s);
+  }
+  auto staging = StagingDir::Create(out, overwrite);
+  if (!staging.ok()) return ReportError("resample", staging.status());
+  auto summary = resample::ResampleCapture(*capture, options, staging->path());
+  if (!summary.ok()) return ReportError("resample", summary.status());
+  if (Status s = staging->Commit(); !s.ok()) return ReportError("resample", s);
+  std::printf("%s", summary->text.c_str());
+  std::printf("  sample store %s; report %s; coverage %s\n", out.c_str(),
+              (fs::path(out) / "resample_report.json").string().c_str(),
+              (fs::path(out) / "coverage.png").string().c_str());
+  return 0;
+}
+
+}  // namespace reflcap::cli

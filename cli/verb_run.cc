@@ -1,0 +1,189 @@
+// `reflcap run CAPTURE --out DIR`: the whole pipeline in one command — resample the train split,
+// fit, re-render the holdout split, validate — with the same outputs the single verbs write, laid
+// out as DIR/samples, DIR/fit, DIR/renders, DIR/report. `reflcap demo` runs it on a small
+// synthetic capture. The DIR folder is staged: it appears only when every stage succeeded.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+
+#include "cli/cli.h"
+#include "cli/pipeline.h"
+#include "acquire/resample/resample.h"
+#include "acquire/synth/synth.h"
+#include "engine/capture/capture.h"
+#include "engine/core/atomic_file.h"
+#include "engine/core/log.h"
+#include "engine/core/progress.h"
+#include "engine/fit/fit_driver.h"
+#include "engine/fit/fitter.h"
+#include "engine/fit/vulkan_fitter.h"
+#include "render/reference/render_capture.h"
+#include "render/validate/validate.h"
+
+namespace reflcap::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::string FormatDb(const std::optional<double>& db) {
+  return db ? StrCat(std::round(*db * 100) / 100, " dB") : std::string("n/a");
+}
+
+}  // namespace
+
+StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std::string& device) {
+  FitBackendChoice result;
+  if (name != "auto") {
+    auto backend = fit::ParseBackend(name);
+    if (!backend.ok()) return InvalidArgumentError(backend.status().message(), " or auto");
+    if (!device.empty() && *backend != fit::Backend::kVulkan) {
+      return InvalidArgumentError("--device needs --backend vulkan or auto");
+    }
+    result.backend = *backend;
+    return result;
+  }
+  REFLCAP_ASSIGN_OR_RETURN(fit::AutoBackendChoice chosen, fit::ChooseAutoBackend(device));
+  result.backend = chosen.backend;
+  result.choice = StrCat("auto: ", fit::BackendName(chosen.backend), " (", chosen.reason, ")");
+  if (chosen.fell_back) {
+    REFLCAP_LOG(kWarning) << "--backend auto: " << chosen.reason;
+  } else {
+    REFLCAP_LOG(kInfo) << "--backend auto: " << fit::BackendName(chosen.backend) << " ("
+                       << chosen.reason << ")";
+  }
+  return result;
+}
+
+StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::path& out,
+                                      const PipelineOptions& options) {
+  PipelineSummary summary;
+  REFLCAP_ASSIGN_OR_RETURN(Capture capture, ReadCapture(capture_path));
+  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, nullptr));
+  if (capture.CountSplit(Split::kHoldout) == 0) {
+    return FailedPreconditionError(capture.json_path.string(),
+                                   ": images: no holdout photograph to validate against");
+  }
+  REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, options.overwrite));
+  const fs::path dir = staging.path();
+
+  auto start = std::chrono::steady_clock::now();
+  REFLCAP_LOG(kInfo) << "run 1/4: resampling the train split";
+  resample::ResampleOptions resample_options = options.resample;
+  resample_options.split = resample::SplitSelection::kTrain;
+  fs::create_directories(dir / "samples");
+  REFLCAP_ASSIGN_OR_RETURN(resample::ResampleSummary resampled,
+                           resample::ResampleCapture(capture, resample_options, dir / "samples"));
+  summary.resample_s = SecondsSince(start);
+  summary.texels = resampled.texels;
+
+  start = std::chrono::steady_clock::now();
+  REFLCAP_LOG(kInfo) << "run 2/4: fitting";
+  REFLCAP_ASSIGN_OR_RETURN(fit::FitRunSummary fitted,
+                           fit::RunFit(dir / "samples", dir / "fit", options.fit_backend,
+                                       options.fit, /*overwrite=*/false, options.fit_device,
+                                       options.fit_backend_choice));
+  summary.fit_s = SecondsSince(start);
+  summary.fit_device = fitted.device;
+  summary.fits_per_second = fitted.fits_per_second;
+
+  start = std::chrono::steady_clock::now();
+  REFLCAP_LOG(kInfo) << "run 3/4: re-rendering the holdout split";
+  render::CaptureRenderOptions render_options;
+  render_options.split = render::SplitSelection::kHoldout;
+  REFLCAP_RETURN_IF_ERROR(
+      render::RenderCapture(capture, dir / "fit" / "params.exr", dir / "renders", render_options)
+          .status());
+  summary.render_s = SecondsSince(start);
+
+  start = std::chrono::steady_clock::now();
+  REFLCAP_LOG(kInfo) << "run 4/4: validating against the holdout photographs";
+  validate::ValidateOptions validate_options;
+  validate_options.split = render::SplitSelection::kHoldout;
+  validate_options.fit_dir = dir / "fit";
+  validate_options.samples_dir = dir / "samples";
+  REFLCAP_ASSIGN_OR_RETURN(
+      summary.validation,
+      validate::RunValidation(capture, dir / "renders", dir / "report", validate_options));
+  summary.validate_s = SecondsSince(start);
+  REFLCAP_RETURN_IF_ERROR(staging.Commit());
+  return summary;
+}
+
+std::string PipelineSummaryLine(const PipelineSummary& s) {
+  return StrCat("holdout PSNR ", FormatDb(s.validation.psnr_db),
+                s.validation.noise_bound_psnr_db
+                    ? StrCat(" (noise bound ", FormatDb(s.validation.noise_bound_psnr_db), ")")
+                    : std::string(),
+                ", rel. RMSE ",
+                s.validation.rel_rmse ? StrCat(std::round(*s.validation.rel_rmse * 1e4) / 1e4)
+                                      : std::string("n/a"),
+                "; resample ", FormatDuration(s.resample_s), ", fit ", FormatDuration(s.fit_s),
+                " (", s.fit_device, "), render ", FormatDuration(s.render_s), ", validate ",
+                FormatDuration(s.validate_s));
+}
+
+int RunRun(int argc, char** argv) {
+  std::string capture, out, backend = "auto", device;
+  PipelineOptions options;
+  FitFlags fit_flags;
+  ArgParser args("run", "CAPTURE --out DIR [options]",
+                 "The whole pipeline: resample the train split -> fit -> re-render the holdout\n"
+                 "split -> validate. DIR gets samples/, fit/, renders/ and report/ (the outputs of\n"
+                 "the single verbs) and appears only when every stage succeeded.");
+  args.AddPositional("CAPTURE", &capture, "capture.json, or the folder holding it");
+  args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
+  args.AddInt("atlas-res", &options.resample.atlas_resolution,
+              "atlas resolution R (default: the capture's ground truth atlas, else 512)");
+  args.AddDouble("min-cos", &options.resample.min_cos, "sample acceptance: n.l and n.v above this (default 0.15)");
+  args.AddString("backend", &backend, "NAME",
+                 "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
+  args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
+  fit_flags.Register(&args, &options.fit);
+  args.AddFlag("overwrite", &options.overwrite, "replace DIR if it exists (only once the new one is complete)");
+  bool help = false;
+  if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
+    std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s", args.Help().c_str());
+    return 0;
+  }
+  if (out.empty()) {
+    std::fprintf(stderr, "reflcap run: --out DIR is required\n");
+    return kExitUsage;
+  }
+  if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
+    std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  for (const Status& s : {options.resample.Validate(), options.fit.Validate()}) {
+    if (!s.ok()) {
+      std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+      return kExitUsage;
+    }
+  }
+  auto fit_backend = ResolveFitBackend(backend, device);
+  if (!fit_backend.ok()) {
+    if (fit_backend.status().code() == StatusCode::kInvalidArgument) {
+      std::fprintf(stderr, "reflcap run: %s\n", fit_backend.status().message().c_str());
+      return kExitUsage;
+    }
+    return ReportError("run", fit_backend.status());
+  }
+  options.fit_backend = fit_backend->backend;
+  options.fit_device = device;
+  options.fit_backend_choice = fit_backend->choice;
+  auto summary = RunPipeline(capture, out, options);
+  if (!summary.ok()) return ReportError("run", summary.status());
+  std::printf("reflcap run: %s\n", PipelineSummaryLine(*summary).c_str());
+  std::printf("  report: %s\n", (fs::path(out) / "report" / "report.html").string().c_str());
+  return 0;
+}
+
+}  // namespace reflcap::cli
