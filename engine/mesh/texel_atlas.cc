@@ -379,12 +379,15 @@ void ResizeTexels(size_t count, TexelAtlas* atlas) {
 }  // namespace
 
 void TexelAtlas::PixelOfUv(float u, float v, int* x, int* y) const {
-  auto pixel = [](double coordinate, int size) {
-    if (!std::isfinite(coordinate)) return 0;
-    return int(std::clamp(std::floor(coordinate * size), 0.0, double(size - 1)));
+  // Float arithmetic, one rounding per operation, as the GLSL twin (see kTexelTieOffset).
+  auto pixel = [](float coordinate, int size) {
+    const float scaled = coordinate * float(size);
+    const float shifted = scaled + kTexelTieOffset;
+    if (!std::isfinite(shifted)) return 0;
+    return int(std::clamp(std::floor(shifted), 0.0f, float(size - 1)));
   };
-  *x = pixel(double(u), width);
-  *y = pixel(1.0 - double(v), height);
+  *x = pixel(u, width);
+  *y = pixel(1.0f - v, height);
 }
 
 StatusOr<TexelAtlas> BuildTexelAtlas(const TriangleMesh& mesh, int width, int height) {

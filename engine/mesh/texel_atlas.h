@@ -26,6 +26,16 @@
 
 namespace reflcap {
 
+// PixelOfUv's shift of every texel boundary, in texels. A UV that lands on a texel boundary —
+// as synthetic scenes and orthographic cameras make it do — comes out of two renderers (Embree's
+// barycentrics on the CPU, a GPU's) a float ulp or two to either side of it, and floor() would
+// split such ties by rounding noise. Shifted by a non-dyadic 1/300 texel, the tie lies where no
+// float lands exactly, far beyond that noise (a UV times 16,384 texels keeps ~2^-10 of a
+// texel); the shift itself is invisible. The arithmetic is float, in this order, as in its GLSL
+// twin (shaders/render/shading.glsl, `precise`: no fused multiply-add), so equal UVs give equal
+// texels on every device.
+constexpr float kTexelTieOffset = 1.0f / 300.0f;
+
 struct TexelAtlas {
   int width = 0;   // layout size in pixels
   int height = 0;
@@ -44,8 +54,8 @@ struct TexelAtlas {
     *x = int(pixel_of_texel[texel] % uint32_t(width));
     *y = int(pixel_of_texel[texel] / uint32_t(width));
   }
-  // Atlas pixel containing UV (u, v), clamped to the layout (x = floor(u W), y = floor((1-v) H));
-  // non-finite coordinates map to 0.
+  // Atlas pixel containing UV (u, v), clamped to the layout: x = floor(u W + kTexelTieOffset),
+  // y = floor((1 - v) H + kTexelTieOffset) in float; non-finite coordinates map to 0.
   void PixelOfUv(float u, float v, int* x, int* y) const;
 };
 

@@ -589,7 +589,7 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   p.light = point_light ? V4(light_in_object, 1) : V4(light_dir_in_object, 0);
   p.intensity = V4(light.intensity, exposure_s);
   p.intrinsics = {float(fx), float(fy), float(cx), float(cy)};
-  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 0, 0};
+  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 1, 0};  // z: 1 sample per side
   p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
                   float(camera.dist[3])};
   p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
@@ -773,6 +773,7 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
     // Supersampled pass: N x N the resolution (stratum centres), each fragment weighted
     // exposure / N², box-filtered into out_radiance. No shadow map redraw: it is still there.
     SetRows(clip_for_scale(n), p.clip_from_object);
+    p.intrinsics_extra.z = float(n);  // surface.frag: fragment -> stratum centre
     p.intensity.w = float(exposure_s / (double(n) * n));
     REFLCAP_RETURN_IF_ERROR(m.WriteParams(p));
     REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
@@ -827,7 +828,7 @@ StatusOr<RenderResult> VulkanRenderer::RenderNormalMapImage(const Camera& camera
   p.intensity = V4(light.intensity, exposure_s);
   p.intrinsics = {float(camera.K(0, 0)), float(camera.K(1, 1)), float(camera.K(0, 2)),
                   float(camera.K(1, 2))};
-  p.intrinsics_extra = {float(camera.K(0, 1)), float(camera.pixel_size_m), 0, 0};
+  p.intrinsics_extra = {float(camera.K(0, 1)), float(camera.pixel_size_m), 1, 0};
   p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
                   float(camera.dist[3])};
   p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};

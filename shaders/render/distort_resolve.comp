@@ -24,8 +24,8 @@
 #extension GL_GOOGLE_include_directive : require
 
 #define REFLCAP_RENDER_CORNERS
-#include "render/camera.glsl"
 #include "render/shading.glsl"
+#include "render/surface_hit.glsl"
 
 layout(local_size_x = 8, local_size_y = 8) in;
 
@@ -44,27 +44,6 @@ struct Hit {
   uint triangle;
   float b1, b2;  // barycentrics of corners 1 and 2
 };
-
-// Möller–Trumbore: t along the (unit) ray and the barycentrics (b0, b1, b2) of the point where it
-// meets the plane of triangle `tri`. False for a ray parallel to the plane.
-bool IntersectPlane(vec3 o, vec3 d, uint tri, out float t, out vec3 b) {
-  vec3 v0 = corners[3u * tri].position_u.xyz;
-  vec3 e1 = corners[3u * tri + 1u].position_u.xyz - v0;
-  vec3 e2 = corners[3u * tri + 2u].position_u.xyz - v0;
-  vec3 pvec = cross(d, e2);
-  float det = dot(e1, pvec);
-  t = 0.0;
-  b = vec3(0.0);
-  if (det == 0.0) return false;
-  float inv = 1.0 / det;
-  vec3 tvec = o - v0;
-  float b1 = dot(tvec, pvec) * inv;
-  vec3 qvec = cross(tvec, e1);
-  float b2 = dot(d, qvec) * inv;
-  t = dot(e2, qvec) * inv;
-  b = vec3(1.0 - b1 - b2, b1, b2);
-  return true;
-}
 
 uint VisibilityAt(ivec2 q) {
   if (q.x < 0 || q.y < 0 || q.x >= int(params.vis_width) || q.y >= int(params.vis_height)) {
@@ -161,16 +140,9 @@ Sample TraceSample(vec2 pixel) {
   Hit h = FindHit(o, d, vis_pixel);
   if (!h.found) return s;
   s.hit = true;
-  uint i0 = 3u * h.triangle;
-  float b0 = 1.0 - h.b1 - h.b2;
-  RenderCorner c0 = corners[i0], c1 = corners[i0 + 1u], c2 = corners[i0 + 2u];
-  vec3 p = b0 * c0.position_u.xyz + h.b1 * c1.position_u.xyz + h.b2 * c2.position_u.xyz;
-  vec3 n_s = normalize(b0 * c0.normal_v.xyz + h.b1 * c1.normal_v.xyz + h.b2 * c2.normal_v.xyz);
-  vec2 uv = b0 * vec2(c0.position_u.w, c0.normal_v.w) +
-            h.b1 * vec2(c1.position_u.w, c1.normal_v.w) +
-            h.b2 * vec2(c2.position_u.w, c2.normal_v.w);
+  SurfacePoint sp = SurfaceAt(h.triangle, h.b1, h.b2);
   vec4 tri = triangles[h.triangle].normal_curvature;
-  Shade sh = ShadeSurface(p, n_s, tri.xyz, uv, -d, tri.w);
+  Shade sh = ShadeSurface(sp.p, sp.n_s, tri.xyz, sp.uv, -d, tri.w);
   s.radiance = sh.radiance;
   s.aux = sh.aux;
   return s;

@@ -46,10 +46,16 @@ vec3 UnitOrthogonal(vec3 v) {
   return vec3(0.0, -v.z, v.y) / length(v.yz);
 }
 
-// TexelAtlas::PixelOfUv: x = floor(u W), y = floor((1 - v) H), clamped to the layout.
+// TexelAtlas::PixelOfUv: x = floor(u W + kTexelTieOffset), y = floor((1 - v) H +
+// kTexelTieOffset), clamped to the layout, with the C++'s float operations in the same order
+// (`precise`: no fused multiply-add; engine/mesh/texel_atlas.h says why).
+const float kTexelTieOffset = 1.0 / 300.0;
 ivec2 PixelOfUv(vec2 uv) {
-  float x = floor(uv.x * float(params.atlas_width));
-  float y = floor((1.0 - uv.y) * float(params.atlas_height));
+  precise float sx = uv.x * float(params.atlas_width);
+  precise float x = floor(sx + kTexelTieOffset);
+  precise float one_minus_v = 1.0 - uv.y;
+  precise float sy = one_minus_v * float(params.atlas_height);
+  precise float y = floor(sy + kTexelTieOffset);
   x = clamp(x, 0.0, float(params.atlas_width - 1u));
   y = clamp(y, 0.0, float(params.atlas_height - 1u));
   return ivec2(int(x), int(y));

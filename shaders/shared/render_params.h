@@ -33,7 +33,8 @@ struct RenderParams {
   vec4 light;                // xyz: light position (point) or unit direction to it (directional)
   vec4 intensity;            // rgb: radiant intensity; w: pixel weight = exposure_s / samples
   vec4 intrinsics;           // fx, fy, cx, cy of the output camera (pixels)
-  vec4 intrinsics_extra;     // x: skew s; y: orthographic pixel size (m); zw: unused
+  vec4 intrinsics_extra;     // x: skew s; y: orthographic pixel size (m); z: samples per pixel
+                             // side of the rasterised pass (1, or N when supersampled); w: unused
   vec4 distortion;           // k1, k2, p1, p2
   vec4 distortion_extra;     // x: k3; yzw: unused
   vec4 vis_intrinsics;       // fx, fy, cx, cy of the visibility image (distortion resolve)

@@ -419,6 +419,29 @@ TEST(PixelOfUv, ClampsToTheLayout) {
   EXPECT_EQ(x, 0);
 }
 
+TEST(PixelOfUv, DecidesATexelBoundaryTheSameWayFromEitherSideOfIt) {
+  // A boundary UV (0.3 of 10 texels) as two implementations compute it: one float ulp below and
+  // above. Without kTexelTieOffset floor() puts them in texels 2 and 3.
+  TexelAtlas atlas;
+  atlas.width = 10;
+  atlas.height = 10;
+  const float below = std::nextafter(0.3f, 0.0f), above = std::nextafter(0.3f, 1.0f);
+  int x_below, x_above, y;
+  atlas.PixelOfUv(below, 0.5f, &x_below, &y);
+  atlas.PixelOfUv(above, 0.5f, &x_above, &y);
+  EXPECT_EQ(x_below, 3);
+  EXPECT_EQ(x_above, 3);
+  // Rows count from v = 1: 1 - v = 0.7 is the boundary of rows 6 and 7.
+  int x, y_below, y_above;
+  atlas.PixelOfUv(0.5f, std::nextafter(0.3f, 0.0f), &x, &y_below);
+  atlas.PixelOfUv(0.5f, std::nextafter(0.3f, 1.0f), &x, &y_above);
+  EXPECT_EQ(y_below, 7);
+  EXPECT_EQ(y_above, 7);
+  // A point clearly inside a texel is not moved.
+  atlas.PixelOfUv(0.3f - 0.02f, 0.5f, &x, &y);
+  EXPECT_EQ(x, 2);
+}
+
 TEST(BuildNormalMapAtlas, KeepsMaskedPixelsWithUsableNormals) {
   const int width = 4, height = 3;
   Image normals(width, height, 3, 0.0f);
