@@ -7,6 +7,7 @@
 #include "acquire/resample/resample.h"
 #include "engine/core/status.h"
 #include "engine/fit/fitter.h"
+#include "engine/fit/vulkan_fitter.h"
 #include "render/validate/validate.h"
 
 namespace reflcap::cli {
@@ -16,6 +17,7 @@ struct PipelineOptions {
   resample::ResampleOptions resample;  // its split is forced to train
   fit::Backend fit_backend = fit::Backend::kCpu;
   std::string fit_device;         // --device (Vulkan), empty = automatic
+  fit::VulkanFitterOptions fit_vulkan;  // --vulkan-kernel, --cluster-size (device: fit_device)
   std::string fit_backend_choice;  // how --backend auto chose, for fit_report.json
   fit::FitOptions fit;
   bool overwrite = false;
@@ -42,10 +44,13 @@ StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std:
 // Apply, after Parse, turns the names and switches into *options (InvalidArgument for an unknown
 // name: a usage error). Implemented in verb_fit.cc.
 struct FitFlags {
-  std::string lobe_model = "aniso", init = "seed", loss = "none";
+  std::string lobe_model = "aniso", init = "seed", loss = "none", vulkan_kernel = "auto";
+  int cluster_size = 0;
   bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
+  // The Vulkan fitter's kernel and cluster size (after Apply; its device comes from --device).
+  fit::VulkanFitterOptions vulkan;
   void Register(ArgParser* args, fit::FitOptions* options);
-  Status Apply(fit::FitOptions* options) const;
+  Status Apply(fit::FitOptions* options);
 };
 
 // Resample (train) -> fit -> render (holdout) -> validate into `out` (staged).

@@ -41,9 +41,32 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
                   "direction (default 5)");
   args->AddInt("max-iterations", &options->max_iterations,
                "LM steps per stage, 1..10000 (default 100)");
+  args->AddString("vulkan-kernel", &vulkan_kernel, "NAME",
+                  "Vulkan LM kernel: auto (default: clusters on a GPU, lanes on lavapipe), lanes "
+                  "(one problem per invocation) or clusters (a subgroup cluster per problem)");
+  args->AddInt("cluster-size", &cluster_size,
+               "clusters kernel: invocations per problem, a power of two up to 32 and the "
+               "device's subgroup size (default 0 = 8)");
 }
 
-Status FitFlags::Apply(fit::FitOptions* options) const {
+Status FitFlags::Apply(fit::FitOptions* options) {
+  if (vulkan_kernel == "auto") {
+    vulkan.kernel = fit::VulkanFitKernel::kAuto;
+  } else if (vulkan_kernel == "lanes") {
+    vulkan.kernel = fit::VulkanFitKernel::kLanes;
+  } else if (vulkan_kernel == "clusters") {
+    vulkan.kernel = fit::VulkanFitKernel::kClusters;
+  } else {
+    return InvalidArgumentError("--vulkan-kernel: \"", vulkan_kernel,
+                                "\" is not auto, lanes or clusters");
+  }
+  if (cluster_size < 0) {
+    return InvalidArgumentError("--cluster-size must be >= 0, got ", cluster_size);
+  }
+  vulkan.cluster_size = uint32_t(cluster_size);
+  if (Status s = vulkan.Validate(); !s.ok()) {
+    return InvalidArgumentError("--cluster-size: ", s.message());
+  }
   // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
   const bool auto_model = lobe_model == "auto";
   REFLCAP_ASSIGN_OR_RETURN(options->lobe_model,
@@ -114,7 +137,9 @@ int RunFit(int argc, char** argv) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
     return kExitUsage;
   }
-  auto summary = fit::RunFit(samples, out, backend->backend, options, overwrite, device,
+  fit::VulkanFitterOptions vulkan = fit_flags.vulkan;
+  vulkan.device = device;
+  auto summary = fit::RunFit(samples, out, backend->backend, options, overwrite, vulkan,
                               backend->choice);
   if (!summary.ok()) return ReportError("fit", summary.status());
   std::printf("fit  %s  (%s%s)\n", out.c_str(), backend->backend == fit::Backend::kVulkan ? "vulkan: " : "",

@@ -85,7 +85,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   REFLCAP_LOG(kInfo) << "run 2/4: fitting";
   REFLCAP_ASSIGN_OR_RETURN(fit::FitRunSummary fitted,
                            fit::RunFit(dir / "samples", dir / "fit", options.fit_backend,
-                                       options.fit, /*overwrite=*/false, options.fit_device,
+                                       options.fit, /*overwrite=*/false, options.fit_vulkan,
                                        options.fit_backend_choice));
   summary.fit_s = SecondsSince(start);
   summary.fit_device = fitted.device;
@@ -178,6 +178,8 @@ int RunRun(int argc, char** argv) {
   }
   options.fit_backend = fit_backend->backend;
   options.fit_device = device;
+  options.fit_vulkan = fit_flags.vulkan;
+  options.fit_vulkan.device = device;
   options.fit_backend_choice = fit_backend->choice;
   auto summary = RunPipeline(capture, out, options);
   if (!summary.ok()) return ReportError("run", summary.status());

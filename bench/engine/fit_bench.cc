@@ -30,11 +30,15 @@
 #include <ctime>
 #include <map>
 #include <memory>
+#include <tuple>
 
 #include "engine/core/parallel.h"
 #include "engine/fit/fitter.h"
 #include "engine/fit/synthetic_samples.h"
 #include "engine/fit/vulkan_fitter.h"
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+#include "bench/gpu/device_peak.h"
+#endif
 
 namespace reflcap::fit {
 namespace {
@@ -80,24 +84,43 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-// One fitter per backend for the whole run (the Vulkan pipelines are compiled once).
-Fitter* GetFitter(Backend backend, std::string* error) {
-  static std::map<Backend, std::unique_ptr<Fitter>> fitters;
-  static std::map<Backend, std::string> errors;
-  if (!fitters.count(backend) && !errors.count(backend)) {
+// One fitter per configuration for the whole run (the Vulkan pipelines are compiled once),
+// released by main before exit (a GPU driver's exit handlers run before static destructors).
+struct FitterConfig {
+  Backend backend = Backend::kCpu;
+  VulkanFitKernel kernel = VulkanFitKernel::kAuto;
+  uint32_t cluster_size = 0;
+  bool operator<(const FitterConfig& o) const {
+    return std::tie(backend, kernel, cluster_size) < std::tie(o.backend, o.kernel, o.cluster_size);
+  }
+};
+std::map<FitterConfig, std::unique_ptr<Fitter>> g_fitters;
+std::map<FitterConfig, std::string> g_fitter_errors;
+// The device's measured peaks (bench/gpu/device_peak.h), when a Vulkan device was measured.
+double g_peak_gflops = 0;
+
+Fitter* GetFitter(const FitterConfig& config, std::string* error) {
+  if (!g_fitters.count(config) && !g_fitter_errors.count(config)) {
     const char* device = std::getenv("REFLCAP_BENCH_VK_DEVICE");
-    auto created = CreateFitter(backend, 0, device ? device : "");
+    VulkanFitterOptions vulkan;
+    vulkan.device = device ? device : "";
+    vulkan.kernel = config.kernel;
+    vulkan.cluster_size = config.cluster_size;
+    auto created = CreateFitter(config.backend, 0, vulkan);
     if (created.ok()) {
-      fitters[backend] = std::move(created).value();
+      g_fitters[config] = std::move(created).value();
     } else {
-      errors[backend] = created.status().ToString();
+      g_fitter_errors[config] = created.status().ToString();
     }
   }
-  if (errors.count(backend)) {
-    *error = errors[backend];
+  if (g_fitter_errors.count(config)) {
+    *error = g_fitter_errors[config];
     return nullptr;
   }
-  return fitters[backend].get();
+  return g_fitters[config].get();
+}
+Fitter* GetFitter(Backend backend, std::string* error) {
+  return GetFitter(FitterConfig{backend}, error);
 }
 
 // Fits once and reports accuracy counters; false (with a message) when below the bars.
@@ -132,9 +155,11 @@ bool Verify(Fitter& fitter, const Data& d, const FitOptions& options, benchmark:
 }
 
 // Times `chunks` Fit calls on the data of `texels` texels x `samples` samples per iteration.
-void RunFits(benchmark::State& state, Backend backend, int texels, int samples, int chunks = 1) {
+void RunFits(benchmark::State& state, const FitterConfig& config, int texels, int samples,
+             int chunks = 1) {
+  const Backend backend = config.backend;
   std::string error;
-  Fitter* fitter = GetFitter(backend, &error);
+  Fitter* fitter = GetFitter(config, &error);
   if (fitter == nullptr) {
     state.SkipWithError(error.c_str());
     return;
@@ -143,7 +168,8 @@ void RunFits(benchmark::State& state, Backend backend, int texels, int samples, 
   const FitOptions options;  // seed start + two-stage LM, aniso, K = 1, all cores
   if (!Verify(*fitter, d, options, state)) return;
   std::vector<TexelFit> results;
-  double device_seconds = 0, dispatches = 0;
+  double device_seconds = 0, dispatches = 0, prepare_seconds = 0, finish_seconds = 0,
+         evaluations = 0;
   const std::clock_t cpu_start = std::clock();
   for (auto _ : state) {
     for (int c = 0; c < chunks; ++c) {
@@ -151,6 +177,9 @@ void RunFits(benchmark::State& state, Backend backend, int texels, int samples, 
       if (auto* vk = dynamic_cast<VulkanFitter*>(fitter)) {
         device_seconds += vk->last_stats().device_seconds;
         dispatches += vk->last_stats().dispatches;
+        prepare_seconds += vk->last_stats().prepare_seconds;
+        finish_seconds += vk->last_stats().finish_seconds;
+        evaluations += double(vk->last_stats().residual_evaluations);
       }
     }
   }
@@ -164,26 +193,64 @@ void RunFits(benchmark::State& state, Backend backend, int texels, int samples, 
   if (backend == Backend::kVulkan) {
     state.counters["device_s"] = device_seconds / std::max<double>(1, state.iterations());
     state.counters["dispatches"] = dispatches / std::max<double>(1, state.iterations());
+    state.counters["prepare_s"] = prepare_seconds / std::max<double>(1, state.iterations());
+    state.counters["finish_s"] = finish_seconds / std::max<double>(1, state.iterations());
+    // The device's LM work as FLOP/s over the device's batches and over the whole wall time,
+    // and as a fraction of the measured multiply-add peak (bench/gpu/device_peak.h).
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+    const double flops =
+        evaluations * bench::FitFlopsPerResidualEvaluation(ProblemLayout{options.lobe_model,
+                                                                         options.lobes}.NumParams());
+    state.counters["device_gflops"] = flops / std::max(device_seconds, 1e-9) * 1e-9;
+    if (g_peak_gflops > 0) {
+      state.counters["device_peak_pct"] =
+          100 * flops / std::max(device_seconds, 1e-9) * 1e-9 / g_peak_gflops;
+    }
+#endif
+    if (auto* vk = dynamic_cast<VulkanFitter*>(fitter)) {
+      const VulkanFitStats& st = vk->last_stats();
+      state.SetLabel(StrCat(fitter->device(), " [", VulkanFitKernelName(st.kernel),
+                            st.kernel == VulkanFitKernel::kClusters
+                                ? StrCat(" x", st.cluster_size, st.native_math ? ", native exp/log" : "")
+                                : std::string(),
+                            "]"));
+    }
   }
-  state.SetLabel(fitter->device());
+  if (backend != Backend::kVulkan) state.SetLabel(fitter->device());
 }
 
-void BM_FitBatchedCpu(benchmark::State& state) { RunFits(state, Backend::kCpu, kTexels, int(state.range(0))); }
-void BM_FitVulkan(benchmark::State& state) { RunFits(state, Backend::kVulkan, kTexels, int(state.range(0))); }
-void BM_FitCeres(benchmark::State& state) { RunFits(state, Backend::kCeres, kTexels, int(state.range(0))); }
+void BM_FitBatchedCpu(benchmark::State& state) { RunFits(state, {Backend::kCpu}, kTexels, int(state.range(0))); }
+void BM_FitVulkan(benchmark::State& state) { RunFits(state, {Backend::kVulkan}, kTexels, int(state.range(0))); }
+void BM_FitCeres(benchmark::State& state) { RunFits(state, {Backend::kCeres}, kTexels, int(state.range(0))); }
 
 // texels <= 10^5: one Fit call; 10^6: 16 calls on a 62,500-texel chunk (a streamed store).
-void Texels(benchmark::State& state, Backend backend) {
-  const int texels = int(state.range(0));
+void Texels(benchmark::State& state, const FitterConfig& config, int64_t texels) {
   if (texels > 100000) {
-    RunFits(state, backend, kStreamChunkTexels, 64, texels / kStreamChunkTexels);
+    RunFits(state, config, kStreamChunkTexels, 64, int(texels / kStreamChunkTexels));
   } else {
-    RunFits(state, backend, texels, 64);
+    RunFits(state, config, int(texels), 64);
   }
 }
-void BM_FitTexelsBatchedCpu(benchmark::State& state) { Texels(state, Backend::kCpu); }
-void BM_FitTexelsVulkan(benchmark::State& state) { Texels(state, Backend::kVulkan); }
-void BM_FitTexelsCeres(benchmark::State& state) { Texels(state, Backend::kCeres); }
+void BM_FitTexelsBatchedCpu(benchmark::State& state) { Texels(state, {Backend::kCpu}, state.range(0)); }
+void BM_FitTexelsVulkan(benchmark::State& state) { Texels(state, {Backend::kVulkan}, state.range(0)); }
+void BM_FitTexelsCeres(benchmark::State& state) { Texels(state, {Backend::kCeres}, state.range(0)); }
+// The Vulkan fitter's kernels side by side at 10^6 texels: /kernel/cluster_size/texels, kernel
+// 0 = lanes, 1 = clusters (bench/RESULTS.md's GPU sweep; slow on lavapipe: run it on a GPU).
+void BM_FitVulkanKernel(benchmark::State& state) {
+  const FitterConfig config{Backend::kVulkan,
+                            state.range(0) == 0 ? VulkanFitKernel::kLanes : VulkanFitKernel::kClusters,
+                            uint32_t(state.range(1))};
+  Texels(state, config, state.range(2));
+}
+BENCHMARK(BM_FitVulkanKernel)
+    ->Args({0, 0, 1000000})
+    ->Args({1, 4, 1000000})
+    ->Args({1, 8, 1000000})
+    ->Args({1, 16, 1000000})
+    ->Args({1, 32, 1000000})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1);
 
 #define REFLCAP_SAMPLES_SWEEP(bench) \
   BENCHMARK(bench)->Arg(64)->Arg(16)->Arg(32)->Arg(128)->Arg(256)->Arg(512)->Arg(1024) \
@@ -203,15 +270,33 @@ BENCHMARK(BM_FitTexelsCeres)->Arg(1000)->Arg(10000)
 }  // namespace
 }  // namespace reflcap::fit
 
-// Google Benchmark's main, plus the Vulkan device (or why there is none) in the context block.
+// Google Benchmark's main, plus the Vulkan device (or why there is none) and its measured peaks
+// in the context block; the fitters are released before exit.
 int main(int argc, char** argv) {
+  using namespace reflcap;
   std::string error;
-  reflcap::fit::Fitter* vk = reflcap::fit::GetFitter(reflcap::fit::Backend::kVulkan, &error);
+  fit::Fitter* vk = fit::GetFitter(fit::Backend::kVulkan, &error);
   benchmark::AddCustomContext("vulkan_device", vk ? vk->device() : "unavailable: " + error);
   std::printf("Vulkan device: %s\n", vk ? vk->device().c_str() : ("unavailable: " + error).c_str());
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+  if (vk != nullptr) {
+    const char* device = std::getenv("REFLCAP_BENCH_VK_DEVICE");
+    StatusOr<bench::DevicePeak> peak = bench::MeasureDevicePeak(device ? device : "");
+    if (peak.ok()) {
+      fit::g_peak_gflops = peak->mad_gflops;
+      benchmark::AddCustomContext("device_mad_gflops", StrCat(peak->mad_gflops));
+      benchmark::AddCustomContext("device_copy_gbps", StrCat(peak->copy_gbps));
+      std::printf("device peaks: %.0f GFLOP/s multiply-add, %.0f GB/s device copy (%s)\n",
+                  peak->mad_gflops, peak->copy_gbps, peak->timing.c_str());
+    } else {
+      std::printf("device peaks: not measured (%s)\n", peak.status().ToString().c_str());
+    }
+  }
+#endif
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
+  fit::g_fitters.clear();
   return 0;
 }

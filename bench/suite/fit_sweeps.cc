@@ -7,6 +7,10 @@
 #include <limits>
 
 #include "bench/suite/sweeps.h"
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+#include "bench/gpu/device_peak.h"
+#endif
+#include "engine/fit/vulkan_fitter.h"
 #include "engine/core/log.h"
 #include "engine/fit/synthetic_samples.h"
 
@@ -199,6 +203,16 @@ std::vector<FitRecord> RunFitSweep(const FitSweepConfig& config, FitterSet& fitt
         r.seconds = t.seconds;
         r.fits_per_second = r.fits / std::max(t.seconds, 1e-12);
         r.fits_per_cpu_second = r.fits / std::max(t.cpu_seconds, 1e-12);
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+        if (const auto* vk = dynamic_cast<const fit::VulkanFitter*>(fitter.get())) {
+          // The last repetition's residual evaluations (every repetition does the same work).
+          const fit::ProblemLayout layout{BaseOptions(0).lobe_model, BaseOptions(0).lobes};
+          r.gflops = double(vk->last_stats().residual_evaluations) *
+                     bench::FitFlopsPerResidualEvaluation(layout.NumParams()) /
+                     std::max(t.seconds, 1e-12) * 1e-9;
+          if (fitters.peak_gflops > 0) r.peak_fraction = r.gflops / fitters.peak_gflops;
+        }
+#endif
         r.invalid_reason = CheckStrict(r.accuracy, bounds);
         r.valid = r.invalid_reason.empty();
       }

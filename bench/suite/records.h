@@ -49,6 +49,11 @@ struct FitRecord {  // bench_results.json "fit"
   double seconds = 0;  // wall clock per repetition
   double fits_per_second = 0;
   double fits_per_cpu_second = 0;
+  // Vulkan only (0 elsewhere): the device's LM work per second of wall time, in GFLOP/s
+  // (residual evaluations x bench/gpu/device_peak.h FitFlopsPerResidualEvaluation), and as a
+  // fraction of the device's measured multiply-add peak (SuiteResults::device_mad_gflops).
+  double gflops = 0;
+  double peak_fraction = 0;
   Accuracy accuracy;
   bool valid = false;
   std::string invalid_reason;
@@ -122,8 +127,11 @@ struct OmittedBackend {
 
 struct SuiteResults {
   MachineInfo machine;
-  std::string device;  // Vulkan device name, or "unavailable: <why>"
+  std::string device;  // Vulkan device, driver and API version, or "unavailable: <why>"
   bool device_available = false;
+  // The device's measured peaks (bench/gpu/device_peak.h; 0 when not measured).
+  double device_mad_gflops = 0;
+  double device_copy_gbps = 0;
   std::string date;    // ISO 8601 UTC, when the run started
   std::string reflcap_version;
   std::string scale;   // tiny | quick | full

@@ -48,6 +48,10 @@ Json ToJson(const FitRecord& r) {
   j["seconds"] = Number(r.seconds);
   j["fits_per_second"] = Number(r.fits_per_second);
   j["fits_per_cpu_second"] = Number(r.fits_per_cpu_second);
+  if (r.gflops > 0) {
+    j["gflops"] = Number(r.gflops);
+    j["peak_fraction"] = Number(r.peak_fraction);
+  }
   AddAccuracy(r.accuracy, &j);
   AddValidity(r.valid, r.invalid_reason, &j);
   return j;
@@ -137,6 +141,8 @@ Json BuildJson(const SuiteResults& r) {
                   {"summary", r.machine.ToString()}};
   j["device"] = r.device;
   j["device_available"] = r.device_available;
+  j["device_mad_gflops"] = Number(r.device_mad_gflops);
+  j["device_copy_gbps"] = Number(r.device_copy_gbps);
   j["date"] = r.date;
   j["reflcap_version"] = r.reflcap_version;
   j["quick"] = r.scale == "quick";
@@ -422,6 +428,12 @@ std::string BuildIndex(const SuiteResults& r, const Json& j, const std::vector<N
       << "<tr><th>date</th><td>" << Html(r.date) << "</td></tr>\n"
       << "<tr><th>machine</th><td>" << Html(r.machine.ToString()) << "</td></tr>\n"
       << "<tr><th>device</th><td>" << Html(r.device) << "</td></tr>\n"
+      << "<tr><th>device peaks</th><td>"
+      << (r.device_mad_gflops > 0
+              ? StrCat(std::lround(r.device_mad_gflops), " GFLOP/s multiply-add, ",
+                       std::lround(r.device_copy_gbps), " GB/s device copy (measured)")
+              : std::string("not measured"))
+      << "</td></tr>\n"
       << "<tr><th>reflcap</th><td>" << Html(r.reflcap_version) << "</td></tr>\n"
       << "<tr><th>total time</th><td>" << std::lround(r.total_seconds) << " s</td></tr>\n";
   for (const OmittedBackend& o : r.omitted) {
@@ -509,6 +521,10 @@ std::string SuiteSummaryText(const SuiteResults& r) {
   std::ostringstream out;
   out << "machine: " << r.machine.ToString() << "\n"
       << "device:  " << r.device << "\n";
+  if (r.device_mad_gflops > 0) {
+    out << "peaks:   " << std::lround(r.device_mad_gflops) << " GFLOP/s multiply-add, "
+        << std::lround(r.device_copy_gbps) << " GB/s device copy\n";
+  }
   for (const OmittedBackend& o : r.omitted) out << "omitted: " << o.backend << ": " << o.reason << "\n";
   auto round = [](double v) { return std::lround(v); };
   for (const FitRecord& f : r.fit) {
@@ -516,6 +532,9 @@ std::string SuiteSummaryText(const SuiteResults& r) {
     out << "fit, 64 samples: " << f.backend << " " << round(f.fits_per_second) << " fits/s ("
         << round(f.fits_per_cpu_second) << " per CPU-s), converged "
         << std::round(f.accuracy.converged_fraction * 1000) / 10 << " %"
+        << (f.gflops > 0 ? StrCat(", ", std::lround(f.gflops), " GFLOP/s = ",
+                                  std::round(f.peak_fraction * 1000) / 10, " % of peak")
+                         : std::string())
         << (f.valid ? "" : ", INVALID") << "\n";
   }
   std::map<std::string, int> pareto;

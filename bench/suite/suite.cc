@@ -5,6 +5,9 @@
 #include <chrono>
 #include <ctime>
 
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+#include "bench/gpu/device_peak.h"
+#endif
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
 #include "engine/fit/vulkan_fitter.h"
@@ -189,11 +192,22 @@ StatusOr<SuiteResults> RunSuite(const SuiteOptions& options) {
       vo.threads = options.threads;
       auto vk = fit::CreateVulkanFitter(vo);
       if (vk.ok()) {
-        results.device = (*vk)->device_name();
+        results.device = (*vk)->device();
         if ((*vk)->software_device()) {
           results.device += " (a CPU implementation: its timings are CPU timings)";
         }
         results.device_available = true;
+#ifdef REFLCAP_HAVE_DEVICE_PEAK
+        // The device's peaks, so that its fits/s can be read as a fraction of what it can do.
+        StatusOr<bench::DevicePeak> peak = bench::MeasureDevicePeak(options.vulkan_device);
+        if (peak.ok()) {
+          results.device_mad_gflops = peak->mad_gflops;
+          results.device_copy_gbps = peak->copy_gbps;
+          fitters.peak_gflops = peak->mad_gflops;
+        } else {
+          REFLCAP_LOG(kWarning) << "bench: device peaks not measured: " << peak.status().ToString();
+        }
+#endif
         fitter = std::unique_ptr<fit::Fitter>(std::move(vk).value());
       } else {
         fitter = vk.status();

@@ -39,6 +39,7 @@ namespace reflcap::benchsuite {
 struct FitterSet {
   std::map<fit::Backend, std::unique_ptr<fit::Fitter>> fitters;
   int threads = 0;
+  double peak_gflops = 0;  // the Vulkan device's measured multiply-add peak (0: not measured)
 };
 
 struct FitSweepConfig {

@@ -132,12 +132,12 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
 }
 
 StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
-                               const FitOptions& options, bool overwrite, const std::string& device,
-                               const std::string& backend_choice) {
+                               const FitOptions& options, bool overwrite,
+                               const VulkanFitterOptions& vulkan, const std::string& backend_choice) {
   const auto start = std::chrono::steady_clock::now();
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter,
-                           CreateFitter(backend, options.threads, device));
+                           CreateFitter(backend, options.threads, vulkan));
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
   const SampleStoreInfo& info = store->info();
   REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
@@ -178,6 +178,8 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   FitOptions iso_options = options;
   iso_options.lobe_model = LobeModel::kIso;
   size_t iso_chosen = 0;
+  VulkanFitStats vulkan_stats;  // summed over the chunks (kVulkan)
+  bool used_vulkan = false;
   auto read = [&store](uint32_t index) { return store->ReadChunk(index); };
   std::future<StatusOr<TexelSampleChunk>> next;
   if (info.chunks > 0) next = std::async(std::launch::async, read, 0u);
@@ -194,6 +196,20 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     }
     const auto fit_start = std::chrono::steady_clock::now();
     REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, options, &results));
+    if (const auto* vk = dynamic_cast<const VulkanFitter*>(fitter.get())) {
+      const VulkanFitStats& st = vk->last_stats();
+      vulkan_stats.kernel = st.kernel;
+      vulkan_stats.cluster_size = st.cluster_size;
+      vulkan_stats.native_math = st.native_math;
+      vulkan_stats.batches += st.batches;
+      vulkan_stats.dispatches += st.dispatches;
+      vulkan_stats.gpu_problems += st.gpu_problems;
+      vulkan_stats.cpu_problems += st.cpu_problems;
+      vulkan_stats.device_seconds += st.device_seconds;
+      vulkan_stats.prepare_seconds += st.prepare_seconds;
+      vulkan_stats.finish_seconds += st.finish_seconds;
+      used_vulkan = true;
+    }
     if (select_model) {
       REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, iso_options, &iso_results));
       for (size_t i = 0; i < results.size(); ++i) {
@@ -234,13 +250,21 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       }
       if (round_stats.no_donor == round_stats.recipients) break;  // no candidate anywhere
       lenders.assign(info.texels, 0);
+      // Chunks hold consecutive texels: only those with a recipient that has candidates are
+      // read, the next one while the current one is tested (as the fit pass prefetches).
+      std::vector<uint32_t> wanted;
       for (uint32_t c = 0; c < info.chunks; ++c) {
-        // Chunks hold consecutive texels: skip those without a recipient that has candidates.
         const uint64_t first = uint64_t(c) * info.chunk_texels;
         const uint64_t end = std::min<uint64_t>(first + info.chunk_texels, info.texels);
-        if (!candidates.AnyIn(first, end)) continue;
-        REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk chunk, store->ReadChunk(c));
-        ApplyLobeTransfer(chunk, candidates, options.lobe_transfer, options.min_cos_theta,
+        if (candidates.AnyIn(first, end)) wanted.push_back(c);
+      }
+      std::future<StatusOr<TexelSampleChunk>> pending;
+      if (!wanted.empty()) pending = std::async(std::launch::async, read, wanted[0]);
+      for (size_t w = 0; w < wanted.size(); ++w) {
+        StatusOr<TexelSampleChunk> chunk = pending.get();
+        if (!chunk.ok()) return chunk.status();
+        if (w + 1 < wanted.size()) pending = std::async(std::launch::async, read, wanted[w + 1]);
+        ApplyLobeTransfer(*chunk, candidates, options.lobe_transfer, options.min_cos_theta,
                           options.threads, &fits, &round_stats, &lenders);
       }
       if (round == 0) transfer.rejected = round_stats.rejected;
@@ -338,6 +362,20 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"texels_per_second", fit_seconds > 0 ? info.texels / fit_seconds : 0.0},
   };
   if (!backend_choice.empty()) report["backend_choice"] = backend_choice;
+  if (used_vulkan) {
+    // Where the Vulkan fitter's time went (wall-clock seconds summed over chunks; the device's
+    // batches overlap the host's preparation and post-processing).
+    report["vulkan"] = {{"kernel", VulkanFitKernelName(vulkan_stats.kernel)},
+                        {"cluster_size", vulkan_stats.cluster_size},
+                        {"native_math", vulkan_stats.native_math},
+                        {"batches", vulkan_stats.batches},
+                        {"dispatches", vulkan_stats.dispatches},
+                        {"device_problems", vulkan_stats.gpu_problems},
+                        {"cpu_route_problems", vulkan_stats.cpu_problems},
+                        {"device_s", vulkan_stats.device_seconds},
+                        {"prepare_s", vulkan_stats.prepare_seconds},
+                        {"finish_s", vulkan_stats.finish_seconds}};
+  }
   if (select_model) report["lobe_model_choice"] = {{"aniso", info.texels - iso_chosen}, {"iso", iso_chosen}};
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);

@@ -20,6 +20,7 @@
 #include "engine/core/status.h"
 #include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
+#include "engine/fit/vulkan_fitter.h"
 #include "engine/mesh/texel_atlas.h"
 
 namespace reflcap::fit {
@@ -35,8 +36,8 @@ struct FitRunSummary {
 };
 
 // Reads SAMPLES, fits with `backend`, writes FIT (refused when it exists non-empty, unless
-// overwrite). `device` chooses the Vulkan device (kVulkan; "" = automatic, else an index or a
-// name substring); `backend_choice`, when given, is written to fit_report.json as the reason for
+// overwrite). `vulkan` configures kVulkan: its device ("" = automatic, else an index or a name
+// substring), kernel and cluster size; `backend_choice`, when given, is written to fit_report.json as the reason for
 // the backend (`--backend auto`). The report's "device" is Fitter::device() (for kVulkan the
 // device's name and driver). Errors: NotFound/DataLoss from the store, Unavailable for a
 // backend this build or machine lacks, NotFound when `device` matches no device,
@@ -44,7 +45,7 @@ struct FitRunSummary {
 StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
                                const std::filesystem::path& out, Backend backend,
                                const FitOptions& options, bool overwrite,
-                               const std::string& device = "",
+                               const VulkanFitterOptions& vulkan = {},
                                const std::string& backend_choice = "");
 
 // Writes status.exr, params.exr and sigma.exr for the per-texel fits in `atlas` layout into

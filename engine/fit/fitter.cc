@@ -267,12 +267,18 @@ std::unique_ptr<Fitter> CreateScalarFitter(bool use_double, int threads) {
 
 StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads,
                                                const std::string& device) {
+  VulkanFitterOptions vulkan;
+  vulkan.device = device;
+  return CreateFitter(backend, threads, vulkan);
+}
+
+StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads,
+                                               const VulkanFitterOptions& vulkan) {
   switch (backend) {
     case Backend::kCpu: return internal::CreateBatchedFitter(threads);
     case Backend::kCeres: return internal::CreateCeresFitter(threads);
     case Backend::kVulkan: {
-      VulkanFitterOptions options;
-      options.device = device;
+      VulkanFitterOptions options = vulkan;
       options.threads = threads;
       REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<VulkanFitter> fitter, CreateVulkanFitter(options));
       return std::unique_ptr<Fitter>(std::move(fitter));

@@ -187,8 +187,12 @@ LmKernels::~LmKernels() {
   if (set_layout_ != VK_NULL_HANDLE) vkDestroyDescriptorSetLayout(device_, set_layout_, nullptr);
 }
 
-StatusOr<VkPipeline> LmKernels::Pipeline(gpu::ShaderId shader, int loss) {
-  const int key = int(shader) * 4 + loss;
+StatusOr<VkPipeline> LmKernels::Pipeline(gpu::ShaderId shader, int loss, uint32_t cluster_size,
+                                         bool native_math) {
+  static_assert(sizeof(gpu::shared::FitGpuClusterPush) == sizeof(gpu::shared::FitGpuPush),
+                "both kernels share the pipeline layout's push-constant range");
+  const uint64_t key = ((uint64_t(shader) * 4 + uint64_t(loss)) * 64 + cluster_size) * 2 +
+                       (native_math ? 1 : 0);
   auto it = pipelines_.find(key);
   if (it != pipelines_.end()) return it->second;
   const gpu::Span spirv = gpu::ShaderBlob(shader);
@@ -198,11 +202,17 @@ StatusOr<VkPipeline> LmKernels::Pipeline(gpu::ShaderId shader, int loss) {
   module_info.pCode = spirv.data;
   VkShaderModule module = VK_NULL_HANDLE;
   VK_RETURN_IF_ERROR(vkCreateShaderModule(device_, &module_info, nullptr, &module));
-  // Specialization constants: 0 = local_size_x, 1 = loss (lm_fit.comp's header).
-  const uint32_t data[2] = {local_size_x_, uint32_t(loss)};
-  const VkSpecializationMapEntry entries[2] = {{gpu::kLocalSizeXConstantId, 0, 4}, {1, 4, 4}};
+  // Specialization constants: 0 = local_size_x, 1 = loss (lm_fit.comp's header), 2 = cluster
+  // size, 3 = native exp/log (lm_fit_cluster.comp; entries a module does not use are ignored).
+  const uint32_t data[4] = {local_size_x_, uint32_t(loss), cluster_size,
+                            native_math ? VK_TRUE : VK_FALSE};
+  const VkSpecializationMapEntry entries[4] = {
+      {gpu::kLocalSizeXConstantId, 0, 4},
+      {1, 4, 4},
+      {uint32_t(gpu::shared::kFitClusterSizeConstantId), 8, 4},
+      {uint32_t(gpu::shared::kFitNativeMathConstantId), 12, sizeof(VkBool32)}};
   VkSpecializationInfo spec{};
-  spec.mapEntryCount = 2;
+  spec.mapEntryCount = 4;
   spec.pMapEntries = entries;
   spec.dataSize = sizeof data;
   spec.pData = data;
@@ -267,6 +277,25 @@ void LmKernels::RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
   vkCmdPipelineBarrier(c, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1,
                        &barrier, 0, nullptr, 0, nullptr);
+}
+
+void LmKernels::RecordClusterDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
+                                      const gpu::shared::FitGpuClusterPush& push, uint32_t groups,
+                                      bool barrier) const {
+  const VkCommandBuffer c = cmd.handle();
+  vkCmdBindPipeline(c, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+  vkCmdBindDescriptorSets(c, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set_, 0, nullptr);
+  vkCmdPushConstants(c, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+  vkCmdDispatch(c, groups, 1, 1);
+  if (!barrier) return;
+  VkMemoryBarrier b{};
+  b.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+  b.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
+                    VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+  vkCmdPipelineBarrier(c, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1,
+                       &b, 0, nullptr, 0, nullptr);
 }
 
 }  // namespace reflcap::fit::internal

@@ -76,8 +76,11 @@ class LmKernels {
   LmKernels(const LmKernels&) = delete;
   LmKernels& operator=(const LmKernels&) = delete;
 
-  // The pipeline of `shader` specialised for `loss` (kFitLoss*).
-  StatusOr<VkPipeline> Pipeline(gpu::ShaderId shader, int loss);
+  // The pipeline of `shader` specialised for `loss` (kFitLoss*) and, for the cluster kernel, its
+  // cluster size and whether it uses the device's exp/log (constants 2 and 3; lm_fit.comp has
+  // neither and ignores them).
+  StatusOr<VkPipeline> Pipeline(gpu::ShaderId shader, int loss, uint32_t cluster_size = 8,
+                                bool native_math = false);
   // Points the descriptor set at `b`. No submission that uses the set may be running.
   void Write(const LmBindings& b);
   // Records binding `pipeline` and the set, the push constants, the dispatch of `groups`
@@ -85,6 +88,11 @@ class LmKernels {
   // (recording).
   void RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
                       const gpu::shared::FitGpuPush& push, uint32_t groups) const;
+  // The same for lm_fit_cluster.comp, without the barrier when `barrier` is false (dispatches
+  // over disjoint queue ranges and control slots may run concurrently).
+  void RecordClusterDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
+                             const gpu::shared::FitGpuClusterPush& push, uint32_t groups,
+                             bool barrier) const;
 
  private:
   LmKernels() = default;
@@ -95,7 +103,7 @@ class LmKernels {
   VkPipelineLayout layout_ = VK_NULL_HANDLE;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
   VkDescriptorSet set_ = VK_NULL_HANDLE;
-  std::map<int, VkPipeline> pipelines_;
+  std::map<uint64_t, VkPipeline> pipelines_;
 };
 
 }  // namespace reflcap::fit::internal

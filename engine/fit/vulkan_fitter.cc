@@ -56,6 +56,31 @@ constexpr uint64_t kDefaultBatchResiduals = uint64_t{1} << 21;  // 40 MiB of rec
 constexpr uint32_t kSoftwareLanes = 1024;
 constexpr uint32_t kGpuLanes = 65536;
 constexpr uint32_t kLocalSize = 64;
+// The cluster kernel (lm_fit_cluster.comp): invocations per problem by default — at 64 samples a
+// problem has 16 quads, two per invocation, and a 32-wide subgroup holds four problems (8, 16
+// and 32 are the choices a GPU's subgroup allows; bench/RESULTS.md has the measured sweep).
+constexpr uint32_t kDefaultClusterSize = 8;
+// Invocations per dispatch: 262,144 fills a large GPU (an H100 holds 132 SMs x 2,048 resident
+// invocations) whatever the cluster size.
+constexpr uint32_t kClusterInvocations = 1u << 18;
+// Problems per dispatch per resident cluster: clusters take new problems as theirs end, so a few
+// per cluster keep the device full while the slowest finish; dispatches of one batch run
+// concurrently (disjoint queue ranges and control slots), recorded into one submission.
+constexpr uint64_t kProblemsPerCluster = 4;
+// Batch limits of the cluster kernel (a GPU holds them easily: 2^25 records are 640 MiB of
+// quads), and the fraction of the device's local memory a batch's buffers may take (two batches
+// are in flight).
+constexpr uint32_t kClusterBatchProblems = 1u << 20;
+// ... but a chunk is cut into at least kClusterBatchesPerChunk batches of at least
+// kMinClusterBatchProblems problems, so the device runs one while the host prepares the next
+// and finishes the last (with one batch per chunk, none of the three overlaps).
+constexpr uint64_t kClusterBatchesPerChunk = 4;
+constexpr uint64_t kMinClusterBatchProblems = 1u << 15;
+constexpr uint64_t kClusterBatchResiduals = uint64_t{1} << 25;
+constexpr uint64_t kDeviceMemoryFraction = 8;
+// Status word of a result before the kernel writes it: a problem still holding it after the
+// submission was never solved (a dispatch cut short).
+constexpr uint32_t kUnsolved = 0xFFFFFFFFu;
 // Loop steps kept back from the device's loop budget for loops a driver compiler might add
 // (lm_fit.comp has exactly two: ticks and samples; fit_vulkan_test.cc checks its SPIR-V).
 constexpr uint32_t kLoopReserve = 32;
@@ -65,6 +90,17 @@ constexpr uint32_t kLoopReserve = 32;
 constexpr uint64_t kMaxResidualEvaluationsPerSubmit = uint64_t{1} << 26;
 // Texels per ParallelFor task in preparation and post-processing.
 constexpr int64_t kTexelsPerTask = 64;
+
+// LM ticks (steps of lm_fit.comp's tick loop, of lm_fit_cluster.comp's step loop) one problem
+// takes at most — a bound no correct run reaches: every tick of a stage either evaluates (<=
+// max_iterations + 1 per stage), rejects a step without evaluating (counted as an iteration), or
+// fails a factorisation (< kLmMaxSolveFailures in a row between the others); two stages, and a
+// tick to start and to end.
+uint64_t ProblemTickBound(const LmSettings& settings) {
+  const uint64_t stage_ticks = (uint64_t(settings.max_iterations) + 2) *
+                               (uint64_t(sh::kLmMaxSolveFailures) + 1);
+  return 2 * stage_ticks + 2;
+}
 
 enum Route : uint8_t { kRouteTrivial = 0, kRouteDevice = 1, kRouteCpu = 2 };
 
@@ -81,6 +117,61 @@ gpu::ShaderId LmShader(const ProblemLayout& layout) {
     case LobeModel::kShared: return kShared[layout.lobes];
   }
   return gpu::ShaderId::kCount;
+}
+
+gpu::ShaderId ClusterShader(const ProblemLayout& layout) {
+  static constexpr gpu::ShaderId kAniso[] = {
+      gpu::ShaderId::kLmFitClusterAnisoK0, gpu::ShaderId::kLmFitClusterAnisoK1,
+      gpu::ShaderId::kLmFitClusterAnisoK2, gpu::ShaderId::kLmFitClusterAnisoK3};
+  static constexpr gpu::ShaderId kIso[] = {
+      gpu::ShaderId::kLmFitClusterIsoK0, gpu::ShaderId::kLmFitClusterIsoK1,
+      gpu::ShaderId::kLmFitClusterIsoK2, gpu::ShaderId::kLmFitClusterIsoK3};
+  static constexpr gpu::ShaderId kShared[] = {gpu::ShaderId::kLmFitClusterSharedK0,
+                                              gpu::ShaderId::kLmFitClusterSharedK1,
+                                              gpu::ShaderId::kLmFitClusterSharedK2};
+  switch (layout.model) {
+    case LobeModel::kAniso: return kAniso[layout.lobes];
+    case LobeModel::kIso: return kIso[layout.lobes];
+    case LobeModel::kShared: return kShared[layout.lobes];
+  }
+  return gpu::ShaderId::kCount;
+}
+
+// The cluster kernel needs subgroup shuffles in compute shaders, a subgroup of at least one
+// cluster, and a workgroup made of whole subgroups (kLocalSize a multiple of the subgroup size).
+bool SupportsClusters(const gpu::DeviceInfo& info) {
+  return info.compute_subgroup_shuffle && info.subgroup_size >= 1 &&
+         kLocalSize % info.subgroup_size == 0;
+}
+
+StatusOr<VulkanFitKernel> ChooseKernel(const gpu::DeviceInfo& info, VulkanFitKernel wanted) {
+  switch (wanted) {
+    case VulkanFitKernel::kAuto:
+      return !info.IsSoftware() && SupportsClusters(info) ? VulkanFitKernel::kClusters
+                                                          : VulkanFitKernel::kLanes;
+    case VulkanFitKernel::kLanes:
+      return VulkanFitKernel::kLanes;
+    case VulkanFitKernel::kClusters:
+      if (!SupportsClusters(info)) {
+        return UnavailableError("Vulkan fitter: the cluster kernel needs subgroup shuffles in "
+                                "compute shaders and a subgroup size dividing ", kLocalSize,
+                                "; ", info.name, " has subgroup size ", info.subgroup_size,
+                                info.compute_subgroup_shuffle ? "" : " and no compute shuffles");
+      }
+      return VulkanFitKernel::kClusters;
+  }
+  return VulkanFitKernel::kLanes;
+}
+
+StatusOr<uint32_t> ChooseClusterSize(const gpu::DeviceInfo& info, uint32_t wanted) {
+  const uint32_t largest = std::min(kMaxVulkanFitClusterSize, info.subgroup_size);
+  if (wanted == 0) return std::min(kDefaultClusterSize, largest);
+  if ((wanted & (wanted - 1)) != 0 || wanted > largest) {
+    return InvalidArgumentError("Vulkan fitter: cluster size ", wanted,
+                                " must be a power of two of at most ", largest, " on ", info.name,
+                                " (subgroup size ", info.subgroup_size, ")");
+  }
+  return wanted;
 }
 
 uint32_t FloatBits(float v) {
@@ -156,6 +247,9 @@ class VulkanFitterImpl final : public VulkanFitter {
     uint64_t max_texels = 0;       // device texels (5 per quad) per batch
     uint32_t max_device_residuals = 0;  // per problem
     uint32_t lane_cap = 0;
+    VulkanFitKernel kernel = VulkanFitKernel::kLanes;
+    uint32_t cluster_size = 0;
+    bool native_math = false;
     bool channel_retry = true;
     LossKind loss = LossKind::kNone;
 
@@ -176,6 +270,10 @@ class VulkanFitterImpl final : public VulkanFitter {
   void Prepare(const TexelSampleChunk& chunk, const FitOptions& options, const Plan& plan,
                uint32_t begin, uint32_t end, Batch* b);
   Status RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b);
+  Status RunLanes(const Plan& plan, VkPipeline pipeline, Batch* b);
+  Status RunClusters(const Plan& plan, VkPipeline pipeline, Batch* b);
+  // Uploads the batch's settings, descriptors, queue (and quads when not written in place).
+  Status UploadBatch(const Plan& plan, Batch* b, uint64_t desc_bytes, uint64_t queue_bytes);
   void Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results);
   Status Ensure(gpu::Buffer* buffer, uint64_t bytes);
 
@@ -346,32 +444,12 @@ Status VulkanFitterImpl::Ensure(gpu::Buffer* buffer, uint64_t bytes) {
 }
 
 Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b) {
-  const auto start = std::chrono::steady_clock::now();
-  b->dispatches = b->ticks = b->lanes = 0;
-  b->evaluations = 0;
-  if (b->queue.empty()) return OkStatus();
-  const int P = plan.num_params;
-  const uint64_t problems = b->problems.size();
-  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
-  const uint64_t queue_bytes = b->queue.size() * 4;
-  const uint64_t texels = std::max<uint64_t>(1, b->quad.back()) * REFLCAP_FIT_QUAD_TEXELS;
-  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
-  const uint32_t lanes = std::min<uint32_t>(uint32_t(b->queue.size()), plan.lane_cap);
-  const uint64_t lane_bytes = uint64_t(lanes) * REFLCAP_FIT_LANE_STRIDE(P) * 4;
-  const uint64_t range = ctx_->info().max_storage_buffer_range;
-  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, lane_bytes}) {
-    if (bytes > range) {
-      return InternalError("Vulkan fitter: a batch binding of ", bytes,
-                           " bytes exceeds maxStorageBufferRange (", range, ")");
-    }
-  }
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
+  return plan.kernel == VulkanFitKernel::kClusters ? RunClusters(plan, pipeline, b)
+                                                   : RunLanes(plan, pipeline, b);
+}
 
+Status VulkanFitterImpl::UploadBatch(const Plan& plan, Batch* b, uint64_t desc_bytes,
+                                     uint64_t queue_bytes) {
   sh::FitGpuSettings settings{};
   {
     double lo[kMaxParams] = {}, hi[kMaxParams] = {};
@@ -390,8 +468,39 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->desc.data(), desc_bytes, buffers_.desc));
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->queue.data(), queue_bytes, buffers_.queue));
   if (b->device_records->mapped() == nullptr) {
+    const uint64_t texels = std::max<uint64_t>(1, b->quad.back()) * REFLCAP_FIT_QUAD_TEXELS;
     REFLCAP_RETURN_IF_ERROR(b->device_records->Upload(*ctx_, cmd_, b->rgba.data(), texels * 16));
   }
+  return OkStatus();
+}
+
+Status VulkanFitterImpl::RunLanes(const Plan& plan, VkPipeline pipeline, Batch* b) {
+  const auto start = std::chrono::steady_clock::now();
+  b->dispatches = b->ticks = b->lanes = 0;
+  b->evaluations = 0;
+  if (b->queue.empty()) return OkStatus();
+  const int P = plan.num_params;
+  const uint64_t problems = b->problems.size();
+  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
+  const uint64_t queue_bytes = b->queue.size() * 4;
+  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
+  const uint32_t lanes = std::min<uint32_t>(uint32_t(b->queue.size()), plan.lane_cap);
+  const uint64_t lane_bytes = uint64_t(lanes) * REFLCAP_FIT_LANE_STRIDE(P) * 4;
+  const uint64_t range = ctx_->info().max_storage_buffer_range;
+  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, lane_bytes}) {
+    if (bytes > range) {
+      return InternalError("Vulkan fitter: a batch binding of ", bytes,
+                           " bytes exceeds maxStorageBufferRange (", range, ")");
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
+
+  REFLCAP_RETURN_IF_ERROR(UploadBatch(plan, b, desc_bytes, queue_bytes));
 
   // Ticks per dispatch: the loop budget (T (Q + 2) + 1 steps for Q quads, see lm_fit.comp) and
   // the submit work cap.
@@ -405,12 +514,7 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
     ticks = std::min<uint64_t>(ticks, options_.max_ticks_per_dispatch);
   }
   REFLCAP_CHECK(ticks >= 1) << "problems above max_device_residuals reached the device";
-  // A bound no correct run reaches: every tick of a stage either evaluates (<= max_iterations +
-  // 1 per stage), rejects a step without evaluating (counted as an iteration), or fails a
-  // factorisation (< kLmMaxSolveFailures in a row between the others).
-  const uint64_t stage_ticks = (uint64_t(plan.settings.max_iterations) + 2) *
-                               (uint64_t(sh::kLmMaxSolveFailures) + 1);
-  const uint64_t problem_ticks = 2 * stage_ticks + 2;
+  const uint64_t problem_ticks = ProblemTickBound(plan.settings);
   const uint64_t max_dispatches = (b->queue.size() * problem_ticks) / (uint64_t(lanes) * ticks) +
                                   problem_ticks / ticks + 3;
 
@@ -450,6 +554,95 @@ Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batc
   REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.results, 0, result_bytes, b->results.data()));
   b->ticks = uint32_t(ticks);
   b->lanes = lanes;
+  b->device_seconds = Seconds(start);
+  return OkStatus();
+}
+
+Status VulkanFitterImpl::RunClusters(const Plan& plan, VkPipeline pipeline, Batch* b) {
+  const auto start = std::chrono::steady_clock::now();
+  b->dispatches = b->ticks = b->lanes = 0;
+  b->evaluations = 0;
+  if (b->queue.empty()) return OkStatus();
+  const int P = plan.num_params;
+  const uint64_t problems = b->problems.size();
+  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
+  const uint64_t queue_bytes = b->queue.size() * 4;
+  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
+  const uint32_t cluster = plan.cluster_size;
+  const uint64_t resident = std::max<uint64_t>(1, plan.lane_cap / cluster);
+  // Problems per dispatch: a few per resident cluster; on a device with a loop budget
+  // (lavapipe, where this kernel runs only when asked for) few enough that one cluster taking
+  // them all stays within it: a step is one pass of the step loop and ceil(Q / C) of the sample
+  // loop plus its exit test, for Q quads.
+  uint64_t per_dispatch = resident * kProblemsPerCluster;
+  const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(*ctx_);
+  if (budget != gpu::kNoLoopIterationLimit) {
+    const uint64_t step = (QuadsOf(b->max_residuals) + cluster - 1) / cluster + 2;
+    const uint64_t per_problem = ProblemTickBound(plan.settings) * step + 1;
+    REFLCAP_CHECK(per_problem <= budget - kLoopReserve)
+        << "problems above max_device_residuals reached the device";
+    per_dispatch = std::min<uint64_t>(per_dispatch, (budget - kLoopReserve) / per_problem);
+  }
+  const uint64_t count = b->queue.size();
+  const uint64_t dispatches = (count + per_dispatch - 1) / per_dispatch;
+  const uint64_t control_bytes = dispatches * sizeof(sh::FitGpuControl);
+  const uint64_t range = ctx_->info().max_storage_buffer_range;
+  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, control_bytes}) {
+    if (bytes > range) {
+      return InternalError("Vulkan fitter: a batch binding of ", bytes,
+                           " bytes exceeds maxStorageBufferRange (", range, ")");
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, 16));  // binding 4: unused by this kernel
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, control_bytes));
+  REFLCAP_RETURN_IF_ERROR(UploadBatch(plan, b, desc_bytes, queue_bytes));
+
+  internal::LmBindings bindings;
+  bindings.settings = gpu::Bind(buffers_.settings, 0, sizeof(sh::FitGpuSettings));
+  bindings.desc = gpu::Bind(buffers_.desc, 0, desc_bytes);
+  bindings.queue = gpu::Bind(buffers_.queue, 0, queue_bytes);
+  bindings.lanes = gpu::Bind(buffers_.lanes, 0, 16);
+  bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
+  bindings.control = gpu::Bind(buffers_.control, 0, control_bytes);
+  bindings.records = b->device_records->view();
+  kernels_->Write(bindings);
+
+  // One submission: reset the counters, mark every result unsolved, then all dispatches (no
+  // barrier between them: disjoint queue ranges, control slots and results).
+  REFLCAP_RETURN_IF_ERROR(cmd_.Begin());
+  REFLCAP_RETURN_IF_ERROR(cmd_.FillBuffer(buffers_.control, 0, control_bytes, 0));
+  REFLCAP_RETURN_IF_ERROR(cmd_.FillBuffer(buffers_.results, 0, result_bytes, kUnsolved));
+  uint32_t max_invocations = 0;
+  for (uint64_t d = 0; d < dispatches; ++d) {
+    const uint64_t begin = d * per_dispatch;
+    const uint64_t n = std::min(per_dispatch, count - begin);
+    const uint64_t invocations = std::min(n, resident) * cluster;
+    max_invocations = std::max<uint32_t>(max_invocations, uint32_t(invocations));
+    const sh::FitGpuClusterPush push{uint32_t(begin), uint32_t(n), uint32_t(d), 0};
+    kernels_->RecordClusterDispatch(cmd_, pipeline, push,
+                                    uint32_t(gpu::GroupCount(invocations, kLocalSize)),
+                                    /*barrier=*/d + 1 == dispatches);
+  }
+  REFLCAP_RETURN_IF_ERROR(cmd_.SubmitAndWait());
+  std::vector<sh::FitGpuControl> control(dispatches);
+  REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.control, 0, control_bytes, control.data()));
+  b->results.resize(problems * REFLCAP_FIT_OUT_STRIDE(P));
+  REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.results, 0, result_bytes, b->results.data()));
+  for (const sh::FitGpuControl& c : control) b->evaluations += c.evaluations;
+  for (uint32_t i : b->queue) {
+    if (b->results[size_t(i) * REFLCAP_FIT_OUT_STRIDE(P) + sh::kFitOutStatus] == kUnsolved) {
+      return InternalError("Vulkan fitter: problem ", i, " of a batch of ", count,
+                           " was not solved by the cluster kernel (", dispatches,
+                           " dispatches of up to ", per_dispatch, " problems on ",
+                           ctx_->info().name, ")");
+    }
+  }
+  b->dispatches = uint32_t(dispatches);
+  b->lanes = max_invocations;
   b->device_seconds = Seconds(start);
   return OkStatus();
 }
@@ -522,31 +715,67 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
                                         : HardwareThreads();
   const gpu::DeviceInfo& info = ctx_->info();
   const int P = plan.num_params;
+  REFLCAP_ASSIGN_OR_RETURN(plan.kernel, ChooseKernel(info, options_.kernel));
+  if (plan.kernel == VulkanFitKernel::kClusters) {
+    REFLCAP_ASSIGN_OR_RETURN(plan.cluster_size, ChooseClusterSize(info, options_.cluster_size));
+    plan.native_math = options_.native_math == NativeMath::kAuto ? !info.IsSoftware()
+                                                                 : options_.native_math == NativeMath::kOn;
+  }
+  const bool clusters = plan.kernel == VulkanFitKernel::kClusters;
   const uint64_t range = info.max_storage_buffer_range;
   const uint64_t widest = std::max<uint64_t>(REFLCAP_FIT_OUT_STRIDE(P), REFLCAP_FIT_DESC_STRIDE(P)) * 4;
+  uint64_t cluster_batch = kClusterBatchProblems;
+  if (clusters) {
+    const uint64_t chunk_problems = uint64_t(chunk.texel_count) * plan.per_texel;
+    cluster_batch = std::clamp<uint64_t>(chunk_problems / kClusterBatchesPerChunk,
+                                         kMinClusterBatchProblems, kClusterBatchProblems);
+  }
   plan.max_problems = std::min<uint64_t>(
-      options_.max_batch_problems > 0 ? options_.max_batch_problems : kDefaultBatchProblems,
+      options_.max_batch_problems > 0 ? options_.max_batch_problems
+      : clusters                      ? cluster_batch
+                                      : kDefaultBatchProblems,
       range / widest);
   plan.max_problems = std::max<uint32_t>(plan.max_problems, plan.per_texel);
-  plan.max_records =
-      options_.max_batch_residuals > 0 ? options_.max_batch_residuals : kDefaultBatchResiduals;
+  plan.max_records = options_.max_batch_residuals > 0 ? options_.max_batch_residuals
+                     : clusters                       ? kClusterBatchResiduals
+                                                      : kDefaultBatchResiduals;
+  if (options_.max_batch_residuals == 0 && info.device_local_heap_size > 0) {
+    // Two batches in flight, each ~ 20 bytes of quads per record plus descriptors and results.
+    plan.max_records = std::max<uint64_t>(
+        1, std::min(plan.max_records, info.device_local_heap_size / kDeviceMemoryFraction / 20));
+  }
   plan.max_texels = internal::MaxTexelBufferElements(*ctx_);
   const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(info);
-  plan.max_device_residuals = budget == gpu::kNoLoopIterationLimit
-                                  ? uint32_t(std::min<uint64_t>(plan.max_records, 0x7FFFFFFF))
-                                  : 4 * (budget - 3 - kLoopReserve);  // one tick: Q + 2 steps, + 1
+  if (budget == gpu::kNoLoopIterationLimit) {
+    plan.max_device_residuals = uint32_t(std::min<uint64_t>(plan.max_records, 0x7FFFFFFF));
+  } else if (!clusters) {
+    plan.max_device_residuals = 4 * (budget - 3 - kLoopReserve);  // one tick: Q + 2 steps, + 1
+  } else {
+    // One problem, worst case, within the budget: ProblemTickBound steps of ceil(Q / C) + 2.
+    const uint64_t steps = (budget - kLoopReserve - 1) / ProblemTickBound(plan.settings);
+    plan.max_device_residuals =
+        uint32_t(std::max<uint64_t>(steps, 3) - 2) * plan.cluster_size * 4;
+  }
   if (options_.max_device_residuals > 0) {
     plan.max_device_residuals = std::min(plan.max_device_residuals, options_.max_device_residuals);
   }
   plan.lane_cap = options_.lanes > 0 ? options_.lanes
+                  : clusters          ? kClusterInvocations
                   : info.IsSoftware() ? kSoftwareLanes
                                       : kGpuLanes;
   plan.lane_cap = std::min<uint64_t>(plan.lane_cap, range / (REFLCAP_FIT_LANE_STRIDE(P) * 4));
   stats_.loop_budget = budget;
+  stats_.kernel = plan.kernel;
+  stats_.cluster_size = plan.cluster_size;
+  stats_.native_math = plan.native_math;
   stats_.max_device_residuals = plan.max_device_residuals;
   stats_.min_ticks_per_dispatch = 0;
 
-  REFLCAP_ASSIGN_OR_RETURN(VkPipeline pipeline, kernels_->Pipeline(LmShader(plan.layout), int(options.loss)));
+  REFLCAP_ASSIGN_OR_RETURN(
+      VkPipeline pipeline,
+      kernels_->Pipeline(clusters ? ClusterShader(plan.layout) : LmShader(plan.layout),
+                         int(options.loss), std::max<uint32_t>(plan.cluster_size, 1),
+                         plan.native_math));
 
   // Per-worker arenas for one texel of the chunk's largest sample count.
   uint64_t max_samples = 1;
@@ -578,15 +807,25 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
   }
   // Batch k runs on the device while batch k - 1 is finished and batch k + 1 prepared on the CPU
   // (two host batches: k + 1 reuses k - 1's once it is finished).
-  Prepare(chunk, options, plan, cuts[0].first, cuts[0].second, &batches_[0]);
+  auto timed_prepare = [&](uint32_t first, uint32_t last, Batch* b) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Prepare(chunk, options, plan, first, last, b);
+    stats_.prepare_seconds += Seconds(t0);
+  };
+  auto timed_finish = [&](const Batch& b) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Finish(plan, b, results);
+    stats_.finish_seconds += Seconds(t0);
+  };
+  timed_prepare(cuts[0].first, cuts[0].second, &batches_[0]);
   for (size_t k = 0; k < cuts.size(); ++k) {
     Batch& current = batches_[k % 2];
     Batch& other = batches_[(k + 1) % 2];
     std::future<Status> device = std::async(std::launch::async, [&] {
       return RunOnDevice(plan, pipeline, &current);
     });
-    if (k > 0) Finish(plan, other, results);
-    if (k + 1 < cuts.size()) Prepare(chunk, options, plan, cuts[k + 1].first, cuts[k + 1].second, &other);
+    if (k > 0) timed_finish(other);
+    if (k + 1 < cuts.size()) timed_prepare(cuts[k + 1].first, cuts[k + 1].second, &other);
     REFLCAP_RETURN_IF_ERROR(device.get());
     ++stats_.batches;
     stats_.dispatches += current.dispatches;
@@ -606,16 +845,11 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
       stats_.trivial_problems += route == kRouteTrivial;
     }
   }
-  Finish(plan, batches_[(cuts.size() - 1) % 2], results);
+  timed_finish(batches_[(cuts.size() - 1) % 2]);
   return OkStatus();
 }
 
 }  // namespace
-
-Status VulkanFitterOptions::Validate() const {
-  if (threads < 0) return InvalidArgumentError("Vulkan fitter: threads must be >= 0, got ", threads);
-  return OkStatus();
-}
 
 StatusOr<std::unique_ptr<VulkanFitter>> CreateVulkanFitter(const VulkanFitterOptions& options) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());

@@ -36,6 +36,25 @@
 
 namespace reflcap::fit {
 
+// The device's LM kernel.
+enum class VulkanFitKernel {
+  kAuto,      // kClusters on a GPU whose compute shaders have subgroup shuffles, else kLanes
+  kLanes,     // shaders/fit/lm_fit.comp: one problem per persistent invocation, LM state saved
+              // between dispatches of a bounded number of steps (lavapipe's loop budget)
+  kClusters,  // shaders/fit/lm_fit_cluster.comp: a cluster of invocations per problem, the
+              // whole solve on chip in one dispatch (GPUs)
+};
+const char* VulkanFitKernelName(VulkanFitKernel kernel);
+// The largest cluster the cluster kernel takes (lm_fit_cluster.comp kMaxCluster).
+constexpr uint32_t kMaxVulkanFitClusterSize = 32;
+
+// Whether the cluster kernel uses the device's exp and log (fit_model.glsl kFitNativeMath).
+enum class NativeMath {
+  kAuto,  // on a GPU yes, on a CPU device (lavapipe: its built-ins are ~13 % off near 1) no
+  kOn,
+  kOff,
+};
+
 struct VulkanFitterOptions {
   // Device: "" = automatic (a discrete GPU when there is one, else integrated, virtual, CPU),
   // a decimal index or a case-insensitive name substring (gpu::SelectDevice; `--device`).
@@ -43,12 +62,15 @@ struct VulkanFitterOptions {
   // CPU worker threads for preparation and post-processing (0 = all hardware threads;
   // FitOptions::threads overrides it per call when > 0).
   int threads = 0;
-  // Batch limits (0 = automatic: 32,768 problems, 2^21 residual records, both also kept within
+  // Batch limits (0 = automatic: 32,768 problems and 2^21 residual records for kLanes; for
+  // kClusters a quarter of the chunk's problems, at least 32,768 and at most 2^20, and 2^25
+  // records, within an eighth of the device's memory; both also kept within
   // maxStorageBufferRange). Small values make tests exercise many batches.
   uint32_t max_batch_problems = 0;
   uint64_t max_batch_residuals = 0;
-  // Persistent lanes per dispatch (0 = automatic: 1,024 on a CPU device, 65,536 on a GPU; never
-  // more than the batch's problems).
+  // Persistent invocations per dispatch (0 = automatic: kLanes 1,024 on a CPU device, 65,536 on a
+  // GPU; kClusters 262,144, enough resident clusters to fill a large GPU; never more than the
+  // batch's problems need).
   uint32_t lanes = 0;
   // Problems with more residuals than this are solved on the CPU (0 = as many as one
   // invocation's loop budget allows: ~259,800 on lavapipe, unlimited elsewhere). Tests lower it
@@ -60,6 +82,12 @@ struct VulkanFitterOptions {
   // false: never write the residual quads straight into mapped device memory, upload them
   // through the staging buffer as on a discrete GPU (tests exercise that path on lavapipe).
   bool map_device_records = true;
+  // The LM kernel (`--vulkan-kernel`) and, for kClusters, the invocations per problem (0 =
+  // automatic: 8; else a power of two up to 32 and at most the device's subgroup size) and the
+  // device's exp/log.
+  VulkanFitKernel kernel = VulkanFitKernel::kAuto;
+  uint32_t cluster_size = 0;
+  NativeMath native_math = NativeMath::kAuto;
 
   Status Validate() const;
 };
@@ -76,11 +104,16 @@ struct VulkanFitStats {
   uint32_t max_residuals = 0;        // the largest residual count of a device problem
   uint32_t loop_budget = 0;          // MaxLoopIterationsPerInvocation of the device
   uint32_t max_device_residuals = 0; // residual count above which a problem stays on the CPU
-  uint32_t lanes = 0;                // lanes of the largest batch
+  uint32_t lanes = 0;                // lanes (invocations) of the largest batch
+  VulkanFitKernel kernel = VulkanFitKernel::kLanes;  // the kernel that ran
+  uint32_t cluster_size = 0;         // invocations per problem (kClusters), else 0
+  bool native_math = false;          // kClusters with the device's exp/log
   uint64_t residual_evaluations = 0; // model + normal-equation updates of one residual, on the
                                      // device (the LM's unit of work)
   double device_seconds = 0;         // wall-clock time of the device's batches (upload, LM,
                                      // download), overlapped with CPU preparation
+  double prepare_seconds = 0;        // wall-clock time of the host's PrepareTexel passes
+  double finish_seconds = 0;         // wall-clock time of the host's FinishProblem passes
 };
 
 class VulkanFitter : public Fitter {
@@ -91,6 +124,11 @@ class VulkanFitter : public Fitter {
   // True when the device is a CPU implementation (lavapipe): its time is CPU time.
   virtual bool software_device() const = 0;
 };
+
+// CreateFitter (fitter.h) with the Vulkan fitter's options for kVulkan (`vulkan.threads` is
+// replaced by `threads`; the other backends ignore `vulkan`).
+StatusOr<std::unique_ptr<Fitter>> CreateFitter(Backend backend, int threads,
+                                               const VulkanFitterOptions& vulkan);
 
 // A Vulkan fitter on the chosen device. Unavailable with a message saying what is missing when
 // this build has no Vulkan, there is no Vulkan driver or device, or the device cannot be used;

@@ -4,11 +4,6 @@
 
 namespace reflcap::fit {
 
-Status VulkanFitterOptions::Validate() const {
-  if (threads < 0) return InvalidArgumentError("Vulkan fitter: threads must be >= 0, got ", threads);
-  return OkStatus();
-}
-
 StatusOr<std::unique_ptr<VulkanFitter>> CreateVulkanFitter(const VulkanFitterOptions&) {
   return UnavailableError("--backend vulkan: this build of reflcap has no Vulkan support "
                           "(configured with REFLCAP_ENABLE_VULKAN=OFF); use --backend cpu");

@@ -101,7 +101,8 @@ std::string DeviceInfo::LimitsString() const {
       << "  maxComputeWorkGroupCount: " << max_compute_work_group_count[0] << " x "
       << max_compute_work_group_count[1] << " x " << max_compute_work_group_count[2] << "\n"
       << "  maxComputeSharedMemorySize: " << max_compute_shared_memory_size << " B\n"
-      << "  subgroupSize: " << subgroup_size << "\n"
+      << "  subgroupSize: " << subgroup_size
+      << (compute_subgroup_shuffle ? " (compute: basic, vote, shuffle)" : "") << "\n"
       << "  timestampPeriod: " << timestamp_period_ns
       << " ns, timestampValidBits: " << timestamp_valid_bits << "\n"
       << "  features: shaderFloat64=" << shader_float64 << " shaderInt64=" << shader_int64

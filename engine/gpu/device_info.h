@@ -49,6 +49,9 @@ struct DeviceInfo {
   uint64_t device_local_heap_size = 0;          // largest DEVICE_LOCAL heap, bytes
   bool unified_memory = false;    // a DEVICE_LOCAL memory type is also HOST_VISIBLE|HOST_COHERENT
   uint32_t subgroup_size = 0;     // VkPhysicalDeviceVulkan11Properties
+  // Subgroup operations usable in compute shaders: basic, vote and shuffle
+  // (VkPhysicalDeviceVulkan11Properties subgroupSupportedStages / subgroupSupportedOperations).
+  bool compute_subgroup_shuffle = false;
   float timestamp_period_ns = 0;  // nanoseconds per timestamp tick
   // Valid bits of timestamps on the compute queue family reflcap uses (0 = no timestamps there;
   // for a device not opened yet, the best compute family's value).

@@ -28,6 +28,17 @@ enum class ShaderId {
   kLmFitSharedK0,
   kLmFitSharedK1,
   kLmFitSharedK2,
+  kLmFitClusterAnisoK0,  // shaders/fit/lm_fit_cluster.comp: the same LM laid out for GPUs
+  kLmFitClusterAnisoK1,  //   (a cluster of invocations per problem), same permutations
+  kLmFitClusterAnisoK2,
+  kLmFitClusterAnisoK3,
+  kLmFitClusterIsoK0,
+  kLmFitClusterIsoK1,
+  kLmFitClusterIsoK2,
+  kLmFitClusterIsoK3,
+  kLmFitClusterSharedK0,
+  kLmFitClusterSharedK1,
+  kLmFitClusterSharedK2,
   kFitProbe,            // shaders/fit/fit_probe.comp: the fitting model's GLSL twins
   kRenderSurfaceVert,      // shaders/render/surface.vert: camera pass, vertex pulling
   kRenderSurfaceFrag,      // shaders/render/surface.frag: camera pass, per-fragment shading

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <utility>
 
+#include "engine/core/parallel.h"
 #include "engine/gpu/vk_commands.h"
 #include "engine/gpu/vk_status.h"
 
@@ -106,13 +107,30 @@ void Buffer::Release() {
   size_ = 0;
 }
 
+void CopyBytes(void* dst, const void* src, uint64_t size) {
+  if (size < kParallelCopyBytes) {
+    std::memcpy(dst, src, size);
+    return;
+  }
+  const int64_t blocks = int64_t((size + kCopyBlockBytes - 1) / kCopyBlockBytes);
+  ParallelFor(
+      0, blocks, 1,
+      [&](int64_t b0, int64_t b1, int) {
+        const uint64_t begin = uint64_t(b0) * kCopyBlockBytes;
+        const uint64_t end = std::min(size, uint64_t(b1) * kCopyBlockBytes);
+        std::memcpy(static_cast<char*>(dst) + begin, static_cast<const char*>(src) + begin,
+                    end - begin);
+      },
+      std::min(HardwareThreads(), kMaxCopyThreads));
+}
+
 Status Upload(VkContext& ctx, const void* src, uint64_t size, Buffer& dst, uint64_t dst_offset) {
   REFLCAP_RETURN_IF_ERROR(CheckRange(dst, dst_offset, size, "Upload"));
   if (size == 0) return OkStatus();
   if (!dst.host_visible()) {
     return UploadStaged(ctx, src, size, dst, dst_offset, kStagingChunkBytes);
   }
-  std::memcpy(static_cast<char*>(dst.mapped()) + dst_offset, src, size);
+  CopyBytes(static_cast<char*>(dst.mapped()) + dst_offset, src, size);
   return OkStatus();
 }
 
@@ -122,7 +140,7 @@ Status Download(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t
   if (!src.host_visible()) {
     return DownloadStaged(ctx, src, src_offset, size, dst, kStagingChunkBytes);
   }
-  std::memcpy(dst, static_cast<const char*>(src.mapped()) + src_offset, size);
+  CopyBytes(dst, static_cast<const char*>(src.mapped()) + src_offset, size);
   return OkStatus();
 }
 
@@ -131,17 +149,27 @@ Status UploadStaged(VkContext& ctx, const void* src, uint64_t size, Buffer& dst,
   REFLCAP_RETURN_IF_ERROR(CheckRange(dst, dst_offset, size, "UploadStaged"));
   if (staging_bytes == 0) return InvalidArgumentError("UploadStaged: staging_bytes is 0");
   if (size == 0) return OkStatus();
+  // Two halves of the staging buffer, each with its command buffer: the host fills one while the
+  // device copies the other.
   const uint64_t piece = std::min(size, staging_bytes);
-  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece));
-  REFLCAP_ASSIGN_OR_RETURN(CommandBuffer cmd, CommandBuffer::Create(ctx));
-  for (uint64_t done = 0; done < size;) {
+  const int halves = size > piece ? 2 : 1;
+  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece * halves));
+  CommandBuffer cmd[2];
+  for (int h = 0; h < halves; ++h) {
+    REFLCAP_ASSIGN_OR_RETURN(cmd[h], CommandBuffer::Create(ctx));
+  }
+  int h = 0;
+  for (uint64_t done = 0; done < size; h = (h + 1) % halves) {
     const uint64_t n = std::min(size - done, piece);
-    std::memcpy(staging->mapped(), static_cast<const char*>(src) + done, n);
-    REFLCAP_RETURN_IF_ERROR(cmd.Begin());
-    REFLCAP_RETURN_IF_ERROR(cmd.CopyBuffer(*staging, 0, dst, dst_offset + done, n));
-    REFLCAP_RETURN_IF_ERROR(cmd.SubmitAndWait());
+    REFLCAP_RETURN_IF_ERROR(cmd[h].Wait());  // its previous copy has left the staging half
+    CopyBytes(static_cast<char*>(staging->mapped()) + h * piece,
+              static_cast<const char*>(src) + done, n);
+    REFLCAP_RETURN_IF_ERROR(cmd[h].Begin());
+    REFLCAP_RETURN_IF_ERROR(cmd[h].CopyBuffer(*staging, h * piece, dst, dst_offset + done, n));
+    REFLCAP_RETURN_IF_ERROR(cmd[h].Submit());
     done += n;
   }
+  for (int k = 0; k < halves; ++k) REFLCAP_RETURN_IF_ERROR(cmd[k].Wait());
   return OkStatus();
 }
 
@@ -150,16 +178,33 @@ Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, ui
   REFLCAP_RETURN_IF_ERROR(CheckRange(src, src_offset, size, "DownloadStaged"));
   if (staging_bytes == 0) return InvalidArgumentError("DownloadStaged: staging_bytes is 0");
   if (size == 0) return OkStatus();
+  // The device copies piece k + 1 into one half of the staging buffer while the host copies
+  // piece k out of the other.
   const uint64_t piece = std::min(size, staging_bytes);
-  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece));
-  REFLCAP_ASSIGN_OR_RETURN(CommandBuffer cmd, CommandBuffer::Create(ctx));
-  for (uint64_t done = 0; done < size;) {
-    const uint64_t n = std::min(size - done, piece);
-    REFLCAP_RETURN_IF_ERROR(cmd.Begin());
-    REFLCAP_RETURN_IF_ERROR(cmd.CopyBuffer(src, src_offset + done, *staging, 0, n));
-    REFLCAP_RETURN_IF_ERROR(cmd.SubmitAndWait());
-    std::memcpy(static_cast<char*>(dst) + done, staging->mapped(), n);
-    done += n;
+  const uint64_t pieces = (size + piece - 1) / piece;
+  const int halves = pieces > 1 ? 2 : 1;
+  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece * halves));
+  CommandBuffer cmd[2];
+  for (int h = 0; h < halves; ++h) {
+    REFLCAP_ASSIGN_OR_RETURN(cmd[h], CommandBuffer::Create(ctx));
+  }
+  auto start_copy = [&](uint64_t k) -> Status {
+    const int h = int(k % halves);
+    const uint64_t offset = k * piece;
+    REFLCAP_RETURN_IF_ERROR(cmd[h].Begin());
+    REFLCAP_RETURN_IF_ERROR(
+        cmd[h].CopyBuffer(src, src_offset + offset, *staging, h * piece, std::min(piece, size - offset)));
+    return cmd[h].Submit();
+  };
+  REFLCAP_RETURN_IF_ERROR(start_copy(0));
+  for (uint64_t k = 0; k < pieces; ++k) {
+    if (k + 1 < pieces) REFLCAP_RETURN_IF_ERROR(start_copy(k + 1));
+    const int h = int(k % halves);
+    REFLCAP_RETURN_IF_ERROR(cmd[h].Wait());
+    const uint64_t offset = k * piece;
+    CopyBytes(static_cast<char*>(dst) + offset,
+              static_cast<const char*>(staging->mapped()) + h * piece,
+              std::min(piece, size - offset));
   }
   return OkStatus();
 }

@@ -270,7 +270,17 @@ Status CommandBuffer::SubmitAndWait() {
 }
 
 Status CommandBuffer::SubmitAndWait(double timeout_s) {
-  REFLCAP_RETURN_IF_ERROR(CheckRecording("SubmitAndWait"));
+  REFLCAP_RETURN_IF_ERROR(Submit());
+  return Wait(timeout_s);
+}
+
+Status CommandBuffer::Wait() {
+  if (ctx_ == nullptr) return FailedPreconditionError("Wait: empty CommandBuffer");
+  return Wait(ctx_->options().submit_timeout_s);
+}
+
+Status CommandBuffer::Submit() {
+  REFLCAP_RETURN_IF_ERROR(CheckRecording("Submit"));
   recording_ = false;
   // Device writes become visible to host reads of mapped memory once the fence has signalled.
   VkMemoryBarrier to_host{};
@@ -288,9 +298,14 @@ Status CommandBuffer::SubmitAndWait(double timeout_s) {
   submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
   submit.commandBufferCount = 1;
   submit.pCommandBuffers = &command_buffer_;
-  const auto start = std::chrono::steady_clock::now();
+  submit_start_ = std::chrono::steady_clock::now();
   VK_RETURN_IF_ERROR(vkQueueSubmit(ctx_->queue(), 1, &submit, fence_));
   pending_ = true;
+  return OkStatus();
+}
+
+Status CommandBuffer::Wait(double timeout_s) {
+  if (!pending_) return OkStatus();
   const double timeout_ns = std::max(0.0, timeout_s) * 1e9;
   const uint64_t timeout = timeout_ns >= 1.8e19 ? UINT64_MAX : static_cast<uint64_t>(timeout_ns);
   const VkResult r = vkWaitForFences(ctx_->device(), 1, &fence_, VK_TRUE, timeout);
@@ -301,7 +316,7 @@ Status CommandBuffer::SubmitAndWait(double timeout_s) {
   VK_RETURN_IF_ERROR(r);
   pending_ = false;
   last_submit_wall_s_ =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - submit_start_).count();
   return OkStatus();
 }
 

@@ -15,6 +15,8 @@
 // drivers reset the GPU after ~2 s), so long work is split into several submissions.
 #include <vulkan/vulkan.h>
 
+#include <chrono>
+
 #include <cstdint>
 #include <type_traits>
 #include <vector>
@@ -90,6 +92,12 @@ class CommandBuffer {
   // Unavailable then, and the CommandBuffer cannot Begin again until the work has finished.
   Status SubmitAndWait();
   Status SubmitAndWait(double timeout_s);
+  // The two halves of SubmitAndWait, for overlapping host work with the device's: Submit ends
+  // recording and submits; Wait waits for that submission (as SubmitAndWait; OkStatus when
+  // nothing is pending). Begin may follow only after Wait.
+  Status Submit();
+  Status Wait();
+  Status Wait(double timeout_s);
   // Host wall-clock seconds from vkQueueSubmit to the fence wait's return, for the last
   // successful SubmitAndWait.
   double last_submit_wall_s() const { return last_submit_wall_s_; }
@@ -114,6 +122,7 @@ class CommandBuffer {
   bool recording_ = false;
   bool pending_ = false;
   double last_submit_wall_s_ = 0;
+  std::chrono::steady_clock::time_point submit_start_;
 };
 
 }  // namespace reflcap::gpu

@@ -228,6 +228,11 @@ DeviceInfo DescribeDevice(VkPhysicalDevice device, uint32_t index) {
   vkGetPhysicalDeviceProperties2(device, &props2);
   info.max_memory_allocation_size = props11.maxMemoryAllocationSize;
   info.subgroup_size = props11.subgroupSize;
+  constexpr VkSubgroupFeatureFlags kShuffleOps =
+      VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT;
+  info.compute_subgroup_shuffle =
+      (props11.subgroupSupportedStages & VK_SHADER_STAGE_COMPUTE_BIT) != 0 &&
+      (props11.subgroupSupportedOperations & kShuffleOps) == kShuffleOps;
   info.driver_id = static_cast<uint32_t>(props12.driverID);
   info.driver_name = props12.driverName;
   info.driver_info = props12.driverInfo;

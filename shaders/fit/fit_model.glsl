@@ -63,12 +63,23 @@
 bool FitIsFinite(float x) { return (floatBitsToUint(x) & 0x7F800000u) != 0x7F800000u; }
 bool FitIsNan(float x) { return (floatBitsToUint(x) & 0x7FFFFFFFu) > 0x7F800000u; }
 
+// Whether FitExp and FitLog use the device's own exp and log: a specialization constant of
+// lm_fit_cluster.comp (FIT_NATIVE_MATH_CONSTANT_ID defined; true on GPUs, whose exp2/log2 units
+// are within a few ulps — the agreement tests' bounds hold, fit_vulkan_test.cc measures them),
+// false everywhere else (lavapipe's built-ins are far looser: common/precise_math.glsl).
+#ifdef FIT_NATIVE_MATH_CONSTANT_ID
+layout(constant_id = FIT_NATIVE_MATH_CONSTANT_ID) const bool kFitNativeMath = false;
+#else
+const bool kFitNativeMath = false;
+#endif
+
 // e^x for x in [kFitMinLobeLogArg, kFitMaxLobeLogArg] (the callers clamp): Cody and Waite's
 // reduction x = k ln 2 + r, |r| <= ln(2) / 2 (k ln 2 split in two, k C1 exact for |k| < 2^15),
 // e^r by its Taylor series through r^7 (truncation (ln(2) / 2)^8 / 8! < 6e-9 relative, a tenth
 // of an ulp), times 2^k built from its exponent bits (exact: k is in [-115, 22] over the
 // clamped range, so 2^k and the product stay normal). Within 2 ulp of glibc's expf.
 vec4 FitExp(vec4 x) {
+  if (kFitNativeMath) return exp(x);
   vec4 k = floor(x * 1.44269504088896341 + 0.5);
   precise vec4 r = (x - k * 0.693359375) - k * -2.12194440e-4;
   precise vec4 p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 +
@@ -84,6 +95,7 @@ vec4 FitExp(vec4 x) {
 // PreciseLog, 2 atanh(s) summed as one series, is within 3, and b^n turns an ulp of log b into
 // n ulps of the lobe: the CPU paths use libm's correctly rounded logf).
 vec4 FitLog(vec4 x) {
+  if (kFitNativeMath) return log(x);
   ivec4 e;
   vec4 m = frexp(x, e);  // m in [0.5, 1)
   bvec4 low = lessThan(m, vec4(0.70710678118654752));

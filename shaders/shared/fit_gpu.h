@@ -94,6 +94,20 @@ struct FitGpuPush {
 };
 REFLCAP_STD430_SIZE(FitGpuPush, 16);
 
+// Push constants of one dispatch of lm_fit_cluster.comp: the queue entries [queue_begin,
+// queue_begin + queue_count) and the control entry (binding 6) whose `next` hands them out.
+struct FitGpuClusterPush {
+  uint queue_begin;
+  uint queue_count;
+  uint control_slot;
+  uint reserved;
+};
+REFLCAP_STD430_SIZE(FitGpuClusterPush, 16);
+
+// Specialization constants of lm_fit_cluster.comp (0 = local_size_x, 1 = loss as lm_fit.comp).
+REFLCAP_CONST(int, kFitClusterSizeConstantId, 2);  // invocations per problem
+REFLCAP_CONST(int, kFitNativeMathConstantId, 3);   // 1: the device's exp/log (fit_model.glsl)
+
 // Binding 0: what every problem of a batch shares (lm.h's LmSettings and the layout's bounds).
 struct FitGpuSettings {
   float lower[kLmMaxParams];   // ParameterBounds, normalised units
@@ -111,7 +125,8 @@ REFLCAP_STD430_SIZE(FitGpuSettings, 160);
 REFLCAP_STD430_OFFSET(FitGpuSettings, max_iterations, 128);
 REFLCAP_STD430_OFFSET(FitGpuSettings, gradient_tolerance, 144);
 
-// Binding 6: the shared queue head and the dispatch's count of lanes that still hold a problem.
+// Binding 6 (an array: lm_fit.comp uses entry 0, lm_fit_cluster.comp one entry per dispatch):
+// the queue head and the dispatch's count of lanes that still hold a problem.
 struct FitGpuControl {
   uint next;    // queue entries handed out so far (atomicAdd)
   uint busy;    // lanes that ended the dispatch holding an unfinished problem (atomicAdd)

@@ -67,15 +67,20 @@ VulkanFitterOptions TestDevice(VulkanFitterOptions options = {}) {
   return options;
 }
 
-// One fitter per configuration for the whole binary (pipelines are compiled once per device).
-VulkanFitter& SharedVulkanFitter() {
-  static std::unique_ptr<VulkanFitter> fitter = [] {
-    auto created = CreateVulkanFitter(TestDevice());
+// One fitter per kernel for the whole binary (pipelines are compiled once per device); the
+// default (kAuto) is the kernel this device runs in production.
+VulkanFitter& SharedVulkanFitter(VulkanFitKernel kernel = VulkanFitKernel::kAuto) {
+  static std::unique_ptr<VulkanFitter> fitters[3];
+  std::unique_ptr<VulkanFitter>& fitter = fitters[int(kernel)];
+  if (fitter == nullptr) {
+    VulkanFitterOptions options;
+    options.kernel = kernel;
+    auto created = CreateVulkanFitter(TestDevice(options));
     REFLCAP_CHECK(created.ok()) << created.status().ToString();
+    fitter = std::move(created).value();
     // Released after the last test, before static destructors (ReleaseBeforeExit says why).
-    reflcap::testing::ReleaseBeforeExit([] { fitter.reset(); });
-    return std::move(created).value();
-  }();
+    reflcap::testing::ReleaseBeforeExit([&fitter] { fitter.reset(); });
+  }
   return *fitter;
 }
 
@@ -157,14 +162,31 @@ TexelSampleChunk Concatenate(const TexelSampleChunk& first, const TexelSampleChu
   return chunk;
 }
 
-class FitBackendTest : public ::testing::TestWithParam<Backend> {
+// The paths under test: the batched CPU fitter (each test's own baseline) and the Vulkan fitter
+// with each of its kernels, whatever this device would pick — both run on lavapipe in CI (the
+// cluster kernel there with the precise exp/log it uses off GPUs) and on a GPU when there is one.
+enum class FitPath { kCpu, kVulkanLanes, kVulkanClusters };
+const char* FitPathName(FitPath path) {
+  switch (path) {
+    case FitPath::kCpu: return "cpu";
+    case FitPath::kVulkanLanes: return "vulkan_lanes";
+    case FitPath::kVulkanClusters: return "vulkan_clusters";
+  }
+  return "?";
+}
+
+class FitBackendTest : public ::testing::TestWithParam<FitPath> {
  protected:
   void SetUp() override {
-    if (GetParam() == Backend::kVulkan && !NoVulkanReason().empty()) GTEST_SKIP() << NoVulkanReason();
+    if (GetParam() != FitPath::kCpu && !NoVulkanReason().empty()) GTEST_SKIP() << NoVulkanReason();
+  }
+  bool vulkan() const { return GetParam() != FitPath::kCpu; }
+  VulkanFitKernel kernel() const {
+    return GetParam() == FitPath::kVulkanClusters ? VulkanFitKernel::kClusters
+                                                  : VulkanFitKernel::kLanes;
   }
   Fitter& fitter() {
-    return GetParam() == Backend::kVulkan ? static_cast<Fitter&>(SharedVulkanFitter())
-                                          : SharedCpuFitter();
+    return vulkan() ? static_cast<Fitter&>(SharedVulkanFitter(kernel())) : SharedCpuFitter();
   }
   std::vector<TexelFit> Fit(const TexelSampleChunk& chunk, const FitOptions& options) {
     return RunFitter(fitter(), chunk, options);
@@ -190,11 +212,11 @@ TEST_P(FitBackendTest, SynthMaterialsAgreeWithTheCpuPath) {
     options.lobe_model = model;
     const auto reference = RunFitter(SharedCpuFitter(), chunk, options);
     const Agreement a = Compare(reference, Fit(chunk, options));
-    std::printf("  %s %-6s %s\n", BackendName(GetParam()), LobeModelName(model), a.ToString().c_str());
+    std::printf("  %s %-6s %s\n", FitPathName(GetParam()), LobeModelName(model), a.ToString().c_str());
     EXPECT_GE(a.SameStatusFraction(), kMinSameStatus) << LobeModelName(model) << ": " << a.ToString();
     EXPECT_GE(a.SameParamsFraction(), kMinSameStatus) << LobeModelName(model) << ": " << a.ToString();
     EXPECT_GT(a.compared_texels, 1000) << LobeModelName(model);
-    if (GetParam() == Backend::kCpu) {
+    if (GetParam() == FitPath::kCpu) {
       // The baseline: the CPU's scalar float path against its batched lanes.
       auto scalar = CreateScalarFitter(/*use_double=*/false);
       const Agreement base = Compare(reference, RunFitter(*scalar, chunk, options));
@@ -251,7 +273,7 @@ TEST_P(FitBackendTest, LobeCountsLossesAndStartsAgreeAsTheCpuPathsDo) {
     const Agreement a = Compare(reference, fits);
     const Agreement base = Compare(reference, RunFitter(*scalar, chunk, options));
     std::printf("  %s %-22s %s\n  %-6s %-22s baseline (scalar float): %d statuses, %d texels off\n",
-                BackendName(GetParam()), v.name, a.ToString().c_str(), "", v.name,
+                FitPathName(GetParam()), v.name, a.ToString().c_str(), "", v.name,
                 base.texels - base.same_status, base.bad_texels);
     EXPECT_LE(a.texels - a.same_status, Slack(base.texels - base.same_status)) << v.name << ": " << a.ToString();
     EXPECT_LE(a.bad_texels, Slack(base.bad_texels)) << v.name << ": " << a.ToString();
@@ -302,7 +324,7 @@ TEST_P(FitBackendTest, LongSolveOverManySamplesMatchesTheCpuPath) {
   const uint64_t quads = (uint64_t(reference[0].samples) + 3) / 4;
   const uint64_t steps_in_one_invocation = quads * reference[0].iterations;
   std::printf("  %s: %d samples (%llu quads) x %d LM steps = %llu sample-loop passes per channel\n",
-              BackendName(GetParam()), reference[0].samples, static_cast<unsigned long long>(quads),
+              FitPathName(GetParam()), reference[0].samples, static_cast<unsigned long long>(quads),
               reference[0].iterations, static_cast<unsigned long long>(steps_in_one_invocation));
   EXPECT_GT(steps_in_one_invocation, uint64_t{gpu::kLavapipeLoopCounter});
   const Agreement a = Compare(reference, fits);
@@ -314,24 +336,33 @@ TEST_P(FitBackendTest, LongSolveOverManySamplesMatchesTheCpuPath) {
     // in a late acceptance test.
     EXPECT_NEAR(fits[t].iterations, reference[t].iterations, 2) << t;
   }
-  if (GetParam() == Backend::kVulkan) {
-    const VulkanFitStats& stats = SharedVulkanFitter().last_stats();
-    EXPECT_EQ(stats.gpu_problems, 6u);
-    EXPECT_EQ(stats.cpu_problems, 0u);
-    if (stats.loop_budget != gpu::kNoLoopIterationLimit) {
+  if (vulkan()) {
+    const VulkanFitStats& stats = SharedVulkanFitter(kernel()).last_stats();
+    EXPECT_EQ(stats.kernel, kernel());
+    if (stats.loop_budget == gpu::kNoLoopIterationLimit) {
+      EXPECT_EQ(stats.gpu_problems, 6u);
+      EXPECT_EQ(stats.cpu_problems, 0u);
+    } else if (kernel() == VulkanFitKernel::kLanes) {
       // Each dispatch stays within the budget (T (Q + 2) + 1 steps, lm_fit.comp) and the solve
       // took several.
+      EXPECT_EQ(stats.gpu_problems, 6u);
       EXPECT_LE(uint64_t(stats.min_ticks_per_dispatch) * ((stats.max_residuals + 3) / 4 + 2) + 1,
                 stats.loop_budget);
       EXPECT_GT(stats.dispatches, 1u);
+    } else {
+      // The cluster kernel solves a problem within one dispatch: one this long exceeds a loop
+      // budget's worst case, so it takes the CPU route (the same decisions).
+      EXPECT_EQ(stats.cpu_problems, 6u);
+      EXPECT_LT(stats.max_device_residuals, 12288u);
     }
   }
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, FitBackendTest,
-                         ::testing::Values(Backend::kCpu, Backend::kVulkan),
-                         [](const ::testing::TestParamInfo<Backend>& info) {
-                           return std::string(BackendName(info.param));
+                         ::testing::Values(FitPath::kCpu, FitPath::kVulkanLanes,
+                                           FitPath::kVulkanClusters),
+                         [](const ::testing::TestParamInfo<FitPath>& info) {
+                           return std::string(FitPathName(info.param));
                          });
 
 // ---- Vulkan only ------------------------------------------------------------------------------
@@ -371,7 +402,9 @@ TexelSampleChunk MixedChunk(uint64_t seed) {
 TEST_F(VulkanFitterTest, ResumingAcrossDispatchesIsExact) {
   // One tick per dispatch and 7 lanes: every problem's LM state goes through the lane buffer
   // after every evaluation, and lanes take many problems each. Nothing may change, bit for bit.
+  // The lanes kernel's resumption (the cluster kernel solves a problem within one dispatch).
   VulkanFitterOptions one_tick;
+  one_tick.kernel = VulkanFitKernel::kLanes;
   one_tick.max_ticks_per_dispatch = 1;
   one_tick.lanes = 7;
   auto resumed = CreateVulkanFitter(TestDevice(one_tick));
@@ -379,7 +412,7 @@ TEST_F(VulkanFitterTest, ResumingAcrossDispatchesIsExact) {
   const TexelSampleChunk chunk = MixedChunk(81);
   FitOptions options;
   options.lobe_model = LobeModel::kShared;
-  const auto reference = RunFitter(SharedVulkanFitter(), chunk, options);
+  const auto reference = RunFitter(SharedVulkanFitter(VulkanFitKernel::kLanes), chunk, options);
   const auto fits = RunFitter(**resumed, chunk, options);
   const VulkanFitStats& stats = (*resumed)->last_stats();
   EXPECT_EQ(stats.min_ticks_per_dispatch, 1u);
@@ -439,6 +472,56 @@ TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   EXPECT_EQ(stats.gpu_problems, 180u * 3);
   EXPECT_GT(stats.batches, 90u);
   ExpectAgreement(Compare(reference, oversized), "texels larger than a batch");
+}
+
+// The cluster kernel: how problems are split over dispatches and batches, and whether quads are
+// written in place or staged, changes nothing, bit for bit (each problem is solved whole by one
+// cluster, in the same order of sums); another cluster size sums in another order, so it agrees
+// as any two float paths do.
+TEST_F(VulkanFitterTest, ClusterKernelSplitsChangeNothing) {
+  const TexelSampleChunk chunk = MixedChunk(83);
+  FitOptions options;
+  options.lobe_model = LobeModel::kShared;
+  VulkanFitter& shared = SharedVulkanFitter(VulkanFitKernel::kClusters);
+  const auto reference = RunFitter(shared, chunk, options);
+  EXPECT_EQ(shared.last_stats().kernel, VulkanFitKernel::kClusters);
+  EXPECT_GE(shared.last_stats().cluster_size, 1u);
+  auto fit_with = [&](VulkanFitterOptions fitter_options, VulkanFitStats* stats) {
+    fitter_options.kernel = VulkanFitKernel::kClusters;
+    auto fitter = CreateVulkanFitter(TestDevice(fitter_options));
+    EXPECT_TRUE(fitter.ok()) << fitter.status().ToString();
+    if (!fitter.ok()) return std::vector<TexelFit>();
+    auto fits = RunFitter(**fitter, chunk, options);
+    *stats = (*fitter)->last_stats();
+    return fits;
+  };
+  VulkanFitStats stats;
+  // One resident cluster: at most four problems per dispatch (fewer under a loop budget), every
+  // dispatch of the batch recorded into one submission.
+  VulkanFitterOptions one_cluster;
+  one_cluster.lanes = shared.last_stats().cluster_size;
+  const auto split = fit_with(one_cluster, &stats);
+  EXPECT_GE(stats.dispatches, (chunk.texel_count + 3) / 4);
+  EXPECT_EQ(CountDifferent(reference, split), 0);
+  // Many batches, quads staged as a discrete GPU's device-local memory takes them.
+  VulkanFitterOptions staged;
+  staged.max_batch_problems = 25;  // the shared model: one problem per texel, 270 texels
+  staged.map_device_records = false;
+  const auto batched = fit_with(staged, &stats);
+  EXPECT_GT(stats.batches, 8u);
+  EXPECT_EQ(CountDifferent(reference, batched), 0);
+  // Clusters of 2 and 4: another order of sums.
+  for (uint32_t size : {2u, 4u}) {
+    VulkanFitterOptions other;
+    other.cluster_size = size;
+    const auto fits = fit_with(other, &stats);
+    EXPECT_EQ(stats.cluster_size, size);
+    ExpectAgreement(Compare(reference, fits), StrCat("cluster size ", size));
+  }
+  // Cluster sizes the device cannot take are refused up front.
+  VulkanFitterOptions odd;
+  odd.cluster_size = 3;
+  EXPECT_FALSE(odd.Validate().ok());
 }
 
 // Float ulps between a and b (same sign assumed; 0 when equal).
@@ -511,11 +594,17 @@ TEST_F(VulkanFitterTest, ModelTwinsMatchTheCpuModel) {
   EXPECT_LE(max_dn, 1);
 }
 
-// The loop-budget arithmetic (T (R + 2) + 1 steps per dispatch) counts the tick loop and the
-// sample loop; every other loop of lm_fit.comp must have been unrolled into straight code.
+// The loop-budget arithmetic (T (R + 2) + 1 steps per dispatch for lm_fit.comp, ProblemTickBound
+// steps of ceil(Q / C) + 2 per problem for lm_fit_cluster.comp) counts the tick (step) loop and
+// the sample loop; every other loop of both kernels must have been unrolled into straight code.
 TEST(VulkanFitterShaders, HoldOnlyTheTickAndSampleLoops) {
   constexpr uint32_t kOpLoopMerge = 246;
-  for (int id = int(gpu::ShaderId::kLmFitAnisoK0); id <= int(gpu::ShaderId::kLmFitSharedK2); ++id) {
+  static_assert(int(gpu::ShaderId::kLmFitClusterAnisoK0) == int(gpu::ShaderId::kLmFitSharedK2) + 1 &&
+                    int(gpu::ShaderId::kLmFitClusterSharedK2) ==
+                        int(gpu::ShaderId::kLmFitClusterAnisoK0) + 10,
+                "the LM kernels' ids are consecutive");
+  for (int id = int(gpu::ShaderId::kLmFitAnisoK0); id <= int(gpu::ShaderId::kLmFitClusterSharedK2);
+       ++id) {
     const gpu::Span blob = gpu::ShaderBlob(gpu::ShaderId(id));
     int loops = 0;
     for (size_t w = 5; w < blob.size;) {  // after the 5-word header
