@@ -20,7 +20,7 @@ namespace fs = std::filesystem;
 
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
-  int supersample = 1;
+  int supersample = 1, writers = 0;
   bool no_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -31,7 +31,9 @@ int RunRender(int argc, char** argv) {
       "parameter maps in the capture's atlas layout (mesh: BuildTexelAtlas at params.exr's size;\n"
       "normal map: the camera's pixels). A synthetic capture's gt/ folder is a valid FIT.\n"
       "--backend vulkan rasterises on a Vulkan device (a GPU, or lavapipe on the CPU) and writes\n"
-      "the same files; render_report.json names the device.");
+      "the same files; render_report.json names the device. It renders many images per\n"
+      "submission with several submissions in flight; files are written by a pool of threads\n"
+      "while later images render.");
   args.AddPositional("CAPTURE", &capture_path, "capture.json, or the folder holding it");
   args.AddPositional("FIT", &fit, "fit folder holding params.exr (or the params.exr file itself)");
   args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
@@ -43,6 +45,9 @@ int RunRender(int argc, char** argv) {
                  "Vulkan point-light shadow map: auto (default), cube or fitted");
   args.AddInt("supersample", &supersample, "N x N samples per pixel, 1..16 (default 1); mesh captures");
   args.AddFlag("no-shadows", &no_shadows, "do not trace shadow rays (mesh captures)");
+  args.AddInt("writers", &writers,
+              "threads writing the output files while later images render (default 0: one per "
+              "hardware thread)");
   args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
@@ -65,6 +70,9 @@ int RunRender(int argc, char** argv) {
   }
   if (supersample < 1 || supersample > render::kMaxSupersampling) {
     return usage(StrCat("--supersample must be in [1, ", render::kMaxSupersampling, "], got ", supersample));
+  }
+  if (writers < 0 || writers > 256) {
+    return usage(StrCat("--writers must be in [0, 256], got ", writers));
   }
   if (!device.empty() && backend != "vulkan") return usage("--device needs --backend vulkan");
   if (!shadow_map.empty() && backend != "vulkan") return usage("--shadow-map needs --backend vulkan");
@@ -107,6 +115,7 @@ int RunRender(int argc, char** argv) {
   options.split = *selection;
   options.supersampling = supersample;
   options.cast_shadows = !no_shadows;
+  options.writers = writers;
   std::string device_name = "the cpu";
   StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER

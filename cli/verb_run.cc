@@ -20,6 +20,9 @@
 #include "engine/fit/vulkan_fitter.h"
 #include "render/reference/render_capture.h"
 #include "render/validate/validate.h"
+#ifdef REFLCAP_HAVE_VULKAN_RENDERER
+#include "render/vulkan/vulkan_render_capture.h"  // render stage on the fit's GPU (issue 14.3)
+#endif
 
 namespace reflcap::cli {
 namespace fs = std::filesystem;
@@ -95,9 +98,23 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   REFLCAP_LOG(kInfo) << "run 3/4: re-rendering the holdout split";
   render::CaptureRenderOptions render_options;
   render_options.split = render::SplitSelection::kHoldout;
-  REFLCAP_RETURN_IF_ERROR(
-      render::RenderCapture(capture, dir / "fit" / "params.exr", dir / "renders", render_options)
-          .status());
+  bool rendered = false;
+#ifdef REFLCAP_HAVE_VULKAN_RENDERER
+  // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
+  // with the Vulkan renderer, a CPU device (lavapipe) with the CPU reference renderer.
+  if (options.fit_backend == fit::Backend::kVulkan) {
+    REFLCAP_RETURN_IF_ERROR(render::RenderCaptureOnFitDevice(capture, dir / "fit" / "params.exr",
+                                                             dir / "renders", render_options,
+                                                             options.fit_device)
+                                .status());
+    rendered = true;
+  }
+#endif
+  if (!rendered) {
+    REFLCAP_RETURN_IF_ERROR(
+        render::RenderCapture(capture, dir / "fit" / "params.exr", dir / "renders", render_options)
+            .status());
+  }
   summary.render_s = SecondsSince(start);
 
   start = std::chrono::steady_clock::now();

@@ -51,6 +51,9 @@ int RunValidate(int argc, char** argv) {
                      validate::kDefaultMaxFigures, ")"));
   args.AddDouble("error-scale", &options.error_scale,
                  "heat-map range as a fraction of the peak (default 0 = automatic)");
+  args.AddInt("threads", &options.threads,
+              "threads scoring images and writing figures (default 0: one per hardware thread; "
+              "the numbers do not depend on it)");
   args.AddFlag("overwrite", &overwrite, "replace REPORT if it exists (only once the new one is complete)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {

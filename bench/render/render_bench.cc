@@ -5,6 +5,13 @@
 //   BM_Render/<backend>/<size>[/distorted]   backend cpu or vulkan; size = image width = height;
 //                                            "distorted": the capture's camera gets real lens
 //                                            distortion (the Vulkan renderer's resolve path).
+//   BM_RenderBatch/vulkan/<size>[/distorted]/<n>
+//                                            n images per call through VulkanRenderer::
+//                                            RenderImages (the capture's images, cycled):
+//                                            several images per submission, submissions in
+//                                            flight, parallel read-back — what `reflcap render
+//                                            --backend vulkan` does. Every image still draws its
+//                                            own shadow map (kept maps off), as BM_Render's do.
 //
 // Each capture is synthesised at start-up (noise-free; 1 camera x 2 lights x 2 turntable steps;
 // 20,000 texels at 192 px, scaled with the image area up to 1,000,000) and every image of it is
@@ -14,6 +21,8 @@
 //
 // Timing: host wall clock per image (Google Benchmark's real time): CPU rendering on all cores;
 // Vulkan = record + submit + fence wait + read-back; the gpu_s counter is the submit + fence part.
+// BM_RenderBatch first checks that its results are bit-identical to BM_Render's verified
+// per-image Vulkan renders, then times calls of n images (real time per call; images_per_s).
 // On lavapipe the Vulkan "GPU" is this machine's CPU (LLVM-compiled shaders on all cores), shared
 // with everything else running: its numbers are CPU numbers. See bench/render/README.md.
 #include <benchmark/benchmark.h>
@@ -22,6 +31,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -30,6 +40,7 @@
 #include "acquire/synth/synth.h"
 #include "engine/capture/capture.h"
 #include "engine/core/log.h"
+#include "engine/core/parallel.h"
 #include "engine/core/status.h"
 #include "render/reference/render_capture.h"
 #include "render/vulkan/render_agreement.h"
@@ -51,7 +62,9 @@ struct Case {
   bool distorted = false;
   Capture capture;
   std::unique_ptr<FittedCapture> fitted;
-  std::unique_ptr<VulkanRenderer> renderer;
+  std::unique_ptr<VulkanRenderer> renderer;        // RenderImage, kept shadow maps off
+  std::unique_ptr<VulkanRenderer> batch_renderer;  // RenderImages, kept shadow maps off
+  std::vector<RenderResult> vulkan_renders;        // per image, verified against the CPU
   RenderAgreement agreement;  // pooled over the capture's images
   double worst_psnr_db = 0;
 };
@@ -85,7 +98,11 @@ StatusOr<std::unique_ptr<Case>> Prepare(int size, bool distorted, const fs::path
     for (Camera& cam : c->capture.cameras) cam.dist = kDistortion;
   }
   REFLCAP_ASSIGN_OR_RETURN(c->fitted, LoadFittedCapture(c->capture, dir / "gt/params.exr"));
-  REFLCAP_ASSIGN_OR_RETURN(c->renderer, VulkanRenderer::Create(device));
+  // Every image draws its own shadow map (kept maps off): the bench cycles through 4 images,
+  // whose maps a renderer would otherwise keep, which no capture of many lights and poses does.
+  VulkanRenderOptions single_options;
+  single_options.shadow_cache_mib = 0;
+  REFLCAP_ASSIGN_OR_RETURN(c->renderer, VulkanRenderer::Create(device, single_options));
   REFLCAP_RETURN_IF_ERROR(SetFittedScene(*c->renderer, *c->fitted));
   // Verify before timing.
   c->worst_psnr_db = 1e9;
@@ -96,8 +113,99 @@ StatusOr<std::unique_ptr<Case>> Prepare(int size, bool distorted, const fs::path
     const RenderAgreement a = CompareRenders(cpu, gpu);
     c->worst_psnr_db = std::min(c->worst_psnr_db, a.psnr_db);
     c->agreement.Add(a);
+    c->vulkan_renders.push_back(std::move(gpu));
   }
+  // The batch renderer's automatic choices, or REFLCAP_BENCH_RENDER_BATCH_IMAGES /
+  // REFLCAP_BENCH_RENDER_IN_FLIGHT (for tuning on a device).
+  VulkanRenderOptions batch_options = single_options;
+  if (const char* env = std::getenv("REFLCAP_BENCH_RENDER_BATCH_IMAGES")) {
+    batch_options.batch_images = std::atoi(env);
+  }
+  if (const char* env = std::getenv("REFLCAP_BENCH_RENDER_IN_FLIGHT")) {
+    batch_options.batches_in_flight = std::atoi(env);
+  }
+  REFLCAP_ASSIGN_OR_RETURN(c->batch_renderer, VulkanRenderer::Create(device, batch_options));
+  REFLCAP_RETURN_IF_ERROR(SetFittedScene(*c->batch_renderer, *c->fitted));
   return c;
+}
+
+// Images 0, 1, ... n-1 of the capture, cycled.
+std::vector<size_t> Cycled(const Case& c, size_t n) {
+  std::vector<size_t> indices(n);
+  for (size_t i = 0; i < n; ++i) indices[i] = i % c.capture.images.size();
+  return indices;
+}
+
+bool SameBits(const Image& a, const Image& b) {
+  return a.width == b.width && a.height == b.height && a.channels == b.channels &&
+         std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(float)) == 0;
+}
+
+void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
+  if (c->worst_psnr_db < kMinAgreementPsnrDb) {
+    state.SkipWithError(StrCat("Vulkan render disagrees with the CPU reference: worst image ",
+                               c->worst_psnr_db, " dB; ", c->agreement.ToString())
+                            .c_str());
+    return;
+  }
+  const std::vector<size_t> indices = Cycled(*c, n);
+  // Verify: the batched renders are the verified per-image renders, bit for bit.
+  size_t mismatches = 0;
+  Status s = RenderCaptureImagesVulkan(
+      *c->batch_renderer, *c->fitted, indices, Options(), [&](size_t k, RenderResult&& r) {
+        const RenderResult& expected = c->vulkan_renders[indices[k]];
+        if (!SameBits(r.pixels, expected.pixels) || !SameBits(r.mask, expected.mask) ||
+            !SameBits(r.aux, expected.aux)) {
+          ++mismatches;
+        }
+        return OkStatus();
+      });
+  if (!s.ok() || mismatches > 0) {
+    state.SkipWithError(s.ok() ? StrCat(mismatches, " of ", n,
+                                        " batched renders differ from the per-image renders")
+                                     .c_str()
+                               : s.ToString().c_str());
+    return;
+  }
+  double gpu_s = 0, wait_s = 0, readback_s = 0;
+  size_t submissions = 0;
+  for (auto _ : state) {
+    s = RenderCaptureImagesVulkan(*c->batch_renderer, *c->fitted, indices, Options(),
+                                  [](size_t, RenderResult&& r) {
+                                    benchmark::DoNotOptimize(r.pixels.data.data());
+                                    return OkStatus();
+                                  });
+    if (!s.ok()) {
+      state.SkipWithError(s.ToString().c_str());
+      return;
+    }
+    const VulkanBatchStats& b = c->batch_renderer->last_batch_stats();
+    gpu_s += c->batch_renderer->last_stats().gpu_seconds;
+    wait_s += b.wait_s;
+    readback_s += b.readback_s;
+    submissions += b.submissions;
+  }
+  const double images = double(state.iterations()) * double(n);
+  state.SetItemsProcessed(int64_t(images));
+  state.counters["images_per_s"] = benchmark::Counter(images, benchmark::Counter::kIsRate);
+  state.counters["images_per_submission"] = images / double(std::max<size_t>(1, submissions));
+  // Submit to fence signalled, per image (submissions overlap: an upper bound of device time).
+  state.counters["gpu_s"] = gpu_s / std::max(1.0, images);
+  state.counters["wait_s"] = wait_s / std::max(1.0, images);          // host blocked on fences
+  state.counters["readback_s"] = readback_s / std::max(1.0, images);  // host copies, parallel
+  state.counters["psnr_worst_db"] = c->worst_psnr_db;
+  state.counters["in_flight"] = c->batch_renderer->options().batches_in_flight;
+  state.SetLabel(c->batch_renderer->device().name + "; " +
+                 c->batch_renderer->last_stats().shadow_map + " shadow map " +
+                 std::to_string(c->batch_renderer->last_stats().shadow_resolution) + " px");
+}
+
+size_t BatchImages() {
+  if (const char* env = std::getenv("REFLCAP_BENCH_RENDER_BATCH")) {
+    const int n = std::atoi(env);
+    if (n > 0) return size_t(n);
+  }
+  return 64;
 }
 
 void BM_Render(benchmark::State& state, Case* c, bool vulkan) {
@@ -178,15 +286,23 @@ int main(int argc, char** argv) {
     }
   }
   const gpu::DeviceInfo& d = g_cases.front()->renderer->device();
-  std::printf("device: %s%s\ntiming: host wall clock per image (with read-back)\n",
+  std::printf("device: %s%s\ntiming: host wall clock per image (with read-back); "
+              "BM_RenderBatch: per call of n images\n",
               d.ToString().c_str(), d.IsSoftware() ? " (a CPU device: these are CPU numbers)" : "");
   benchmark::AddCustomContext("device", d.ToString());
+  benchmark::AddCustomContext("host_threads", std::to_string(HardwareThreads()));
   for (const auto& c : g_cases) {
     const std::string suffix = std::to_string(c->size) + (c->distorted ? "/distorted" : "");
     benchmark::RegisterBenchmark(("BM_Render/cpu/" + suffix).c_str(), BM_Render, c.get(), false)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
     benchmark::RegisterBenchmark(("BM_Render/vulkan/" + suffix).c_str(), BM_Render, c.get(), true)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    const size_t n = BatchImages();
+    benchmark::RegisterBenchmark(
+        ("BM_RenderBatch/vulkan/" + suffix + "/" + std::to_string(n)).c_str(), BM_RenderBatch,
+        c.get(), n)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
   }

@@ -226,26 +226,38 @@ Status LightMapPass::EnsureTarget(VkContext& ctx, uint32_t resolution, uint32_t 
                                                    VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
                                                    /*sampled_depth=*/true));
   if (pipeline_.handle() == VK_NULL_HANDLE) {
-    // Render passes of maps of other sizes and layer counts are compatible with this one.
-    GraphicsPipelineOptions o;
-    o.vertex = options_.vertex;
-    o.fragment = options_.fragment;
-    o.set_layout = layout_.handle();
-    o.push_constant_bytes = sizeof(shared::LightMapPush);
-    o.color_writes = false;
-    REFLCAP_ASSIGN_OR_RETURN(pipeline_, Pipeline::CreateGraphics(ctx, o, target_->target));
+    REFLCAP_ASSIGN_OR_RETURN(pipeline_, CreateLightMapPipeline(ctx, options_.vertex,
+                                                               options_.fragment, layout_.handle(),
+                                                               target_->target));
   }
   return OkStatus();
 }
 
 void LightMapPass::Record(VkCommandBuffer cmd, uint32_t view_count, uint32_t triangle_count) {
-  pipeline_.Bind(cmd, set_.handle());
+  RecordLightMapViews(cmd, pipeline_, set_.handle(), target_->target, view_count, triangle_count);
+}
+
+StatusOr<Pipeline> CreateLightMapPipeline(VkContext& ctx, ShaderId vertex, ShaderId fragment,
+                                          VkDescriptorSetLayout set_layout,
+                                          const RenderTarget& target) {
+  GraphicsPipelineOptions o;
+  o.vertex = vertex;
+  o.fragment = fragment;
+  o.set_layout = set_layout;
+  o.push_constant_bytes = sizeof(shared::LightMapPush);
+  o.color_writes = false;
+  return Pipeline::CreateGraphics(ctx, o, target);
+}
+
+void RecordLightMapViews(VkCommandBuffer cmd, const Pipeline& pipeline, VkDescriptorSet set,
+                         RenderTarget& target, uint32_t view_count, uint32_t triangle_count) {
+  pipeline.Bind(cmd, set);
   for (uint32_t v = 0; v < view_count; ++v) {
-    target_->target.Begin(cmd, v, {}, 1.0f);
+    target.Begin(cmd, v, {}, 1.0f);
     const shared::LightMapPush push{v};
-    pipeline_.Push(cmd, &push, sizeof(push));
+    pipeline.Push(cmd, &push, sizeof(push));
     vkCmdDraw(cmd, 3 * triangle_count, 1, 0, 0);
-    target_->target.End(cmd);
+    target.End(cmd);
   }
 }
 

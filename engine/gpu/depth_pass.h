@@ -116,6 +116,19 @@ StatusOr<LightMapPlan> PlanLightMap(bool point_light, const Vec3d& light_in_obje
                                     double radius, LightMapShape shape,
                                     const LightMapResolution& resolution);
 
+// The light-map pass's pipeline: depth-only, `vertex` and `fragment` (which writes the distance
+// as depth), set 0 of `set_layout` (the parameter block and the corners), push constant
+// LightMapPush. Created for one light-map target, it serves any other (their render passes differ
+// only in size and layer count, which do not break compatibility).
+StatusOr<Pipeline> CreateLightMapPipeline(VkContext& ctx, ShaderId vertex, ShaderId fragment,
+                                          VkDescriptorSetLayout set_layout,
+                                          const RenderTarget& target);
+// Records the views 0 .. view_count - 1 of a light map, each into its layer of `target` cleared
+// to depth 1 (the map stores distance / scale: 1 = nothing before the scale), drawing
+// 3 x triangle_count non-indexed vertices with `pipeline` and `set`.
+void RecordLightMapViews(VkCommandBuffer cmd, const Pipeline& pipeline, VkDescriptorSet set,
+                         RenderTarget& target, uint32_t view_count, uint32_t triangle_count);
+
 // The light-map pass: a depth-only draw of every triangle into each view's layer of a D32 map,
 // sampled afterwards (SHADER_READ_ONLY_OPTIMAL). Its descriptor set 0 holds two storage buffers
 // read by the vertex and fragment stages — the pass's parameter block (whose views the vertex

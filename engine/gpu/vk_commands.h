@@ -103,6 +103,8 @@ class CommandBuffer {
   double last_submit_wall_s() const { return last_submit_wall_s_; }
 
   bool recording() const { return recording_; }
+  // A submission was made and not yet seen finished by Wait (or Begin).
+  bool pending() const { return pending_; }
   VkCommandBuffer handle() const { return command_buffer_; }
   VkContext& context() const { return *ctx_; }
 

@@ -1,17 +1,22 @@
 // Re-rendering a capture from a parameter map (see render_capture.h).
 #include "render/reference/render_capture.h"
 
+#include <atomic>
 #include <chrono>
+#include <memory>
+#include <mutex>
 #include <set>
 
 #include <nlohmann/json.hpp>
 
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
+#include "engine/core/parallel.h"
 #include "engine/core/progress.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
 #include "engine/mesh/mesh_io.h"
+#include "engine/core/worker_pool.h"
 
 namespace reflcap::render {
 namespace fs = std::filesystem;
@@ -140,12 +145,24 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   return RenderCapture(capture, params_exr, out_dir, options, CpuCaptureRenderBackend());
 }
 
+Status CaptureRenderOptions::Validate() const {
+  if (supersampling < 1 || supersampling > kMaxSupersampling) {
+    return InvalidArgumentError("supersampling must be in [1, ", kMaxSupersampling, "], got ",
+                                supersampling);
+  }
+  if (writers < 0 || writers > 256) {
+    return InvalidArgumentError("writers must be in [0, 256], got ", writers);
+  }
+  return OkStatus();
+}
+
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
                                              const fs::path& out_dir,
                                              const CaptureRenderOptions& options,
                                              const CaptureRenderBackend& backend) {
-  REFLCAP_CHECK(backend.render) << "CaptureRenderBackend::render is empty";
+  REFLCAP_CHECK(backend.render || backend.render_many) << "CaptureRenderBackend renders nothing";
   const auto start = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
   RenderOptions render_options;
   render_options.supersampling = options.supersampling;
   render_options.cast_shadows = options.cast_shadows;
@@ -174,47 +191,106 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   summary.texels = fitted->atlas.TexelCount();
   summary.num_lobes = fitted->maps.num_lobes;
   if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
+  // Every output folder exists before the writers start (they run concurrently).
+  std::set<fs::path> folders;
+  for (size_t index : selected) {
+    const std::string& file = capture.images[index].file;
+    for (const std::string& f : {RenderPathFor(file), MaskPathFor(file), AuxPathFor(file)}) {
+      folders.insert((out_dir / f).parent_path());
+    }
+  }
+  for (const fs::path& folder : folders) {
+    std::error_code ec;
+    fs::create_directories(folder, ec);
+    if (ec) return InternalError(folder.string(), ": cannot create: ", ec.message());
+  }
   summary.load_s = SecondsSince(start);
+  summary.writers = options.writers > 0 ? options.writers : HardwareThreads();
   REFLCAP_LOG(kInfo) << "render: " << summary.texels << " texels ("
                      << (fitted->normal_map ? "normal map" : "mesh atlas") << " "
                      << fitted->atlas.width << "x" << fitted->atlas.height << "), "
-                     << fitted->maps.num_lobes << " lobes; " << selected.size() << " images";
+                     << fitted->maps.num_lobes << " lobes; " << selected.size() << " images, "
+                     << summary.writers << " writer threads";
 
-  Json images = Json::array();
+  // Rendered images go to the writers; at most a few wait for one (their memory is bounded).
+  struct Timing {
+    double render_s = 0, write_s = 0;
+  };
+  std::vector<Timing> timings(selected.size());
+  std::mutex mutex;
+  Status write_error = OkStatus();
+  std::atomic<bool> stop{false};
   Progress progress("render", int64_t(selected.size()));
-  for (size_t index : selected) {
-    const CaptureImage& image = capture.images[index];
-    const auto t0 = std::chrono::steady_clock::now();
-    REFLCAP_ASSIGN_OR_RETURN(RenderResult r, backend.render(*fitted, index, render_options));
-    const double render_s = SecondsSince(t0);
-    summary.render_s += render_s;
-    const auto t1 = std::chrono::steady_clock::now();
-    const std::string render_file = RenderPathFor(image.file);
-    const std::string mask_file = MaskPathFor(image.file);
-    const std::string aux_file = AuxPathFor(image.file);
-    for (const std::string& f : {render_file, mask_file, aux_file}) {
-      std::error_code ec;
-      fs::create_directories((out_dir / f).parent_path(), ec);
-      if (ec) return InternalError((out_dir / f).parent_path().string(), ": cannot create: ", ec.message());
+  const auto render_start = std::chrono::steady_clock::now();
+  auto last_delivery = render_start;
+  Status render_status = OkStatus();
+  {
+    WorkerPool writers(summary.writers, /*max_queued=*/2);
+    auto write = [&](size_t k, const RenderResult& r) -> Status {
+      const std::string& file = capture.images[selected[k]].file;
+      REFLCAP_RETURN_IF_ERROR(
+          WriteExr(out_dir / RenderPathFor(file), r.pixels, ExrPixelType::kFloat));
+      REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / MaskPathFor(file), r.mask));
+      return WriteExrChannels(out_dir / AuxPathFor(file), r.aux, AuxChannelNames(),
+                              ExrPixelType::kFloat);
+    };
+    auto deliver = [&](size_t k, RenderResult&& r) -> Status {
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!write_error.ok()) return write_error;
+      }
+      const auto now = std::chrono::steady_clock::now();
+      timings[k].render_s = std::chrono::duration<double>(now - last_delivery).count();
+      last_delivery = now;
+      auto result = std::make_shared<RenderResult>(std::move(r));
+      writers.Submit([&, k, result] {
+        if (stop) return;
+        const auto t0 = std::chrono::steady_clock::now();
+        Status s = write(k, *result);
+        timings[k].write_s = SecondsSince(t0);
+        if (!s.ok()) {
+          std::lock_guard<std::mutex> lock(mutex);
+          if (write_error.ok()) write_error = s;
+          stop = true;
+          return;
+        }
+        progress.Advance();
+      });
+      return OkStatus();
+    };
+    if (backend.render_many) {
+      render_status = backend.render_many(*fitted, selected, render_options, deliver);
+    } else {
+      for (size_t k = 0; k < selected.size() && render_status.ok(); ++k) {
+        StatusOr<RenderResult> r = backend.render(*fitted, selected[k], render_options);
+        render_status = r.ok() ? deliver(k, std::move(r).value()) : r.status();
+      }
     }
-    REFLCAP_RETURN_IF_ERROR(WriteExr(out_dir / render_file, r.pixels, ExrPixelType::kFloat));
-    REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / mask_file, r.mask));
-    REFLCAP_RETURN_IF_ERROR(
-        WriteExrChannels(out_dir / aux_file, r.aux, AuxChannelNames(), ExrPixelType::kFloat));
-    summary.write_s += SecondsSince(t1);
+    summary.render_s = std::chrono::duration<double>(last_delivery - render_start).count();
+    if (!render_status.ok()) stop = true;  // queued images are not written
+    writers.WaitIdle();
+    summary.write_tail_s = SecondsSince(last_delivery);
+  }
+  // A write error reaches the renderer through `deliver`: report the write error itself.
+  if (!write_error.ok()) return write_error;
+  REFLCAP_RETURN_IF_ERROR(render_status);
+  progress.Finish();
+  summary.images = selected.size();
+  Json images = Json::array();
+  for (size_t k = 0; k < selected.size(); ++k) {
+    const CaptureImage& image = capture.images[selected[k]];
+    summary.write_s += timings[k].write_s;
     images.push_back({{"file", image.file},
-                      {"render", render_file},
-                      {"mask", mask_file},
-                      {"aux", aux_file},
+                      {"render", RenderPathFor(image.file)},
+                      {"mask", MaskPathFor(image.file)},
+                      {"aux", AuxPathFor(image.file)},
                       {"camera", capture.cameras[image.camera].id},
                       {"light", capture.lights[image.light].id},
                       {"turntable_deg", image.turntable_deg},
                       {"split", SplitName(image.split)},
-                      {"render_s", render_s}});
-    progress.Advance();
+                      {"render_s", timings[k].render_s},
+                      {"write_s", timings[k].write_s}});
   }
-  progress.Finish();
-  summary.images = selected.size();
   summary.total_s = SecondsSince(start);
 
   Json report = {
@@ -237,8 +313,18 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         {"curvature", "max turning rate of the shading normal x object size (1 on a sphere)"},
         {"mask", "1 where the ray through the pixel centre hits the object"}}},
       {"images", images},
+      {"writers", summary.writers},
       {"timings", {{"load_s", summary.load_s}, {"render_s", summary.render_s},
-                   {"write_s", summary.write_s}, {"total_s", summary.total_s}}}};
+                   {"write_s", summary.write_s}, {"write_tail_s", summary.write_tail_s},
+                   {"total_s", summary.total_s}}},
+      {"timing_definitions",
+       {{"load_s", "capture, mesh and fit loaded (and uploaded to the device)"},
+        {"render_s", "from then until the last image was rendered"},
+        {"write_s", "wall time spent writing files, summed over the writer threads (overlaps "
+                     "rendering)"},
+        {"write_tail_s", "from the last image rendered until every file was written"},
+        {"images[].render_s", "time since the previous image was rendered (a batch's images "
+                              "arrive together)"}}}};
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "render_report.json", report.dump(2) + "\n"));
   return summary;
 }

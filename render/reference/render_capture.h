@@ -70,18 +70,29 @@ struct CaptureRenderOptions {
   SplitSelection split = SplitSelection::kHoldout;
   int supersampling = 1;     // N x N samples per pixel, [1, kMaxSupersampling]; mesh captures
   bool cast_shadows = true;  // mesh captures
+  // Threads writing the output files while later images render (EXR compression is most of a
+  // GPU render's time); 0 = one per hardware thread. [0, 256].
+  int writers = 0;
+  Status Validate() const;
 };
 
 struct CaptureRenderSummary {
   size_t images = 0;
   size_t texels = 0;
   int num_lobes = 0;
-  double load_s = 0, render_s = 0, write_s = 0, total_s = 0;
+  int writers = 0;
+  // load_s: capture, mesh and fit loaded (and uploaded); render_s: from then until the last image
+  // was rendered; write_s: wall time spent writing files, summed over the writer threads (it
+  // overlaps rendering, and on busy cores includes waiting for one);
+  // write_tail_s: from the last image rendered until its files were written.
+  double load_s = 0, render_s = 0, write_s = 0, write_tail_s = 0, total_s = 0;
 };
 
 // Renders every selected photograph of `capture` into `out_dir` (created if missing), with the
-// layout above. FailedPrecondition when no photograph is selected; errors of LoadFittedCapture
-// and of writing (Internal).
+// layout above; each image's files are written by a pool of writer threads while the next
+// images render. FailedPrecondition when no photograph is selected; errors of LoadFittedCapture,
+// of rendering (naming capture.json and images[i]) and of writing (Internal, naming the file).
+// After an error the folder may hold some images' files (the CLI stages it: nothing appears).
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture,
                                              const std::filesystem::path& params_exr,
                                              const std::filesystem::path& out_dir,
@@ -96,8 +107,16 @@ struct CaptureRenderBackend {
   // Called once, after the capture and the fit are loaded and before the first render (e.g. to
   // upload the scene); may be empty.
   std::function<Status(const FittedCapture&)> prepare;
-  // Renders image `index` (as RenderCaptureImage does); called once per selected image.
+  // Renders image `index` (as RenderCaptureImage does); called once per selected image unless
+  // render_many is set.
   std::function<StatusOr<RenderResult>(const FittedCapture&, size_t, const RenderOptions&)> render;
+  // Optional: renders images `indices` (capture image indices) in one call and hands them over
+  // as sink(k, result) for k = 0, 1, ... (positions in `indices`), in order — a backend that
+  // renders many images per submission (the Vulkan renderer) does it this way.
+  using Sink = std::function<Status(size_t k, RenderResult&& result)>;
+  std::function<Status(const FittedCapture&, const std::vector<size_t>& indices,
+                       const RenderOptions&, const Sink& sink)>
+      render_many;
 };
 // The CPU reference renderer as a backend (what RenderCapture above uses).
 CaptureRenderBackend CpuCaptureRenderBackend();

@@ -32,32 +32,34 @@ double CappedDb(double mse_over_peak2) {
   return std::min(kMaxPsnrDb, -10 * std::log10(mse_over_peak2));
 }
 
-// Separable Gaussian blur (zero outside the image) of a width x height scalar field.
-std::vector<double> Blur(const std::vector<double>& in, int width, int height,
-                         const std::vector<double>& kernel) {
+// Separable Gaussian blur (zero outside the image) of a width x height scalar field into `out`,
+// with `tmp` (same size) as scratch. Each output value is the sum over the kernel taps that fall
+// inside the image, added in tap order starting from 0 — the loops run over a row per tap so the
+// compiler vectorises across pixels, which changes no value's operations.
+void Blur(const double* in, int width, int height, const std::vector<double>& kernel,
+          double* tmp, double* out) {
   const int r = int(kernel.size() / 2);
-  std::vector<double> tmp(in.size(), 0.0), out(in.size(), 0.0);
   for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      double s = 0;
-      for (int k = -r; k <= r; ++k) {
-        const int xx = x + k;
-        if (xx >= 0 && xx < width) s += kernel[k + r] * in[size_t(y) * width + xx];
-      }
-      tmp[size_t(y) * width + x] = s;
+    const double* row = in + size_t(y) * width;
+    double* t = tmp + size_t(y) * width;
+    std::fill(t, t + width, 0.0);
+    for (int k = -r; k <= r; ++k) {
+      const double weight = kernel[k + r];
+      const int x0 = std::max(0, -k), x1 = std::min(width, width - k);
+      for (int x = x0; x < x1; ++x) t[x] += weight * row[x + k];
     }
   }
   for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      double s = 0;
-      for (int k = -r; k <= r; ++k) {
-        const int yy = y + k;
-        if (yy >= 0 && yy < height) s += kernel[k + r] * tmp[size_t(yy) * width + x];
-      }
-      out[size_t(y) * width + x] = s;
+    double* o = out + size_t(y) * width;
+    std::fill(o, o + width, 0.0);
+    for (int k = -r; k <= r; ++k) {
+      const int yy = y + k;
+      if (yy < 0 || yy >= height) continue;
+      const double weight = kernel[k + r];
+      const double* t = tmp + size_t(yy) * width;
+      for (int x = 0; x < width; ++x) o[x] += weight * t[x];
     }
   }
-  return out;
 }
 
 std::vector<double> GaussianKernel() {
@@ -251,10 +253,19 @@ float ToneMap(float x, double inv_mean) {
   return float(std::pow(y / (1 + y), 1 / kToneMapGamma));
 }
 
-double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ssim_map) {
-  REFLCAP_CHECK(a.width == b.width && a.height == b.height && a.channels == b.channels);
+namespace {
+
+// SsimSum of `a` against each of `bs` (sums[j] for bs[j]; ssim_maps[j] optional, may be null):
+// what a and the mask contribute (their moments and blurs) is computed once for all of them.
+void SsimSums(const Image& a, const std::vector<const Image*>& bs, const Image& eval_mask,
+              double* sums, const std::vector<Image*>& ssim_maps) {
   REFLCAP_CHECK(eval_mask.width == a.width && eval_mask.height == a.height);
-  if (ssim_map) *ssim_map = Image(a.width, a.height, 1, 0.0f);
+  for (size_t j = 0; j < bs.size(); ++j) {
+    const Image& b = *bs[j];
+    REFLCAP_CHECK(a.width == b.width && a.height == b.height && a.channels == b.channels);
+    if (ssim_maps[j]) *ssim_maps[j] = Image(a.width, a.height, 1, 0.0f);
+    sums[j] = 0;
+  }
   // Work on the bounding box of the evaluated pixels: windows only use evaluated pixels, so
   // nothing outside it matters (and objects often fill a tenth of the frame).
   int x0 = a.width, y0 = a.height, x1 = -1, y1 = -1;
@@ -264,47 +275,67 @@ double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ss
       x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
     }
   }
-  if (x1 < 0) return 0;
+  if (x1 < 0) return;
   const int w = x1 - x0 + 1, h = y1 - y0 + 1;
   const size_t n = size_t(w) * h;
   auto full = [&](size_t i) { return (size_t(y0) + i / size_t(w)) * a.width + x0 + i % size_t(w); };
   const std::vector<double> kernel = GaussianKernel();
-  std::vector<double> weight(n);
+  std::vector<double> weight(n), weight_sum(n), tmp(n);
   for (size_t i = 0; i < n; ++i) weight[i] = eval_mask.data[full(i) * eval_mask.channels] > 0.5f ? 1 : 0;
-  const std::vector<double> weight_sum = Blur(weight, w, h, kernel);
+  Blur(weight.data(), w, h, kernel, tmp.data(), weight_sum.data());
   const double c1 = kSsimK1 * kSsimK1, c2 = kSsimK2 * kSsimK2;  // L = 1
-  std::vector<double> per_pixel(n, 0.0);
+  std::vector<std::vector<double>> per_pixel(bs.size(), std::vector<double>(n, 0.0));
   std::vector<double> wa(n), wb(n), waa(n), wbb(n), wab(n);
+  std::vector<double> ma(n), mb(n), maa(n), mbb(n), mab(n);
   for (int c = 0; c < a.channels; ++c) {
     for (size_t i = 0; i < n; ++i) {
-      const size_t f = full(i);
-      const double x = a.data[f * a.channels + c], y = b.data[f * b.channels + c];
+      const double x = a.data[full(i) * a.channels + c];
       wa[i] = weight[i] * x;
-      wb[i] = weight[i] * y;
       waa[i] = weight[i] * (x * x);
-      wbb[i] = weight[i] * (y * y);
-      wab[i] = weight[i] * (x * y);
     }
-    const auto ma = Blur(wa, w, h, kernel), mb = Blur(wb, w, h, kernel);
-    const auto maa = Blur(waa, w, h, kernel), mbb = Blur(wbb, w, h, kernel);
-    const auto mab = Blur(wab, w, h, kernel);
+    Blur(wa.data(), w, h, kernel, tmp.data(), ma.data());
+    Blur(waa.data(), w, h, kernel, tmp.data(), maa.data());
+    for (size_t j = 0; j < bs.size(); ++j) {
+      const Image& b = *bs[j];
+      for (size_t i = 0; i < n; ++i) {
+        const size_t f = full(i);
+        const double x = a.data[f * a.channels + c], y = b.data[f * b.channels + c];
+        wb[i] = weight[i] * y;
+        wbb[i] = weight[i] * (y * y);
+        wab[i] = weight[i] * (x * y);
+      }
+      Blur(wb.data(), w, h, kernel, tmp.data(), mb.data());
+      Blur(wbb.data(), w, h, kernel, tmp.data(), mbb.data());
+      Blur(wab.data(), w, h, kernel, tmp.data(), mab.data());
+      std::vector<double>& pp = per_pixel[j];
+      for (size_t i = 0; i < n; ++i) {
+        if (weight[i] == 0) continue;
+        const double norm = 1 / weight_sum[i];  // > 0: the pixel itself is in the window
+        const double mu_a = ma[i] * norm, mu_b = mb[i] * norm;
+        const double var_a = maa[i] * norm - mu_a * mu_a, var_b = mbb[i] * norm - mu_b * mu_b;
+        const double cov = mab[i] * norm - mu_a * mu_b;
+        pp[i] += ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
+                 ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+      }
+    }
+  }
+  for (size_t j = 0; j < bs.size(); ++j) {
+    double sum = 0;
     for (size_t i = 0; i < n; ++i) {
       if (weight[i] == 0) continue;
-      const double norm = 1 / weight_sum[i];  // > 0: the pixel itself is in the window
-      const double mu_a = ma[i] * norm, mu_b = mb[i] * norm;
-      const double var_a = maa[i] * norm - mu_a * mu_a, var_b = mbb[i] * norm - mu_b * mu_b;
-      const double cov = mab[i] * norm - mu_a * mu_b;
-      per_pixel[i] += ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
-                      ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+      const double v = per_pixel[j][i] / a.channels;
+      sum += v;
+      if (ssim_maps[j]) ssim_maps[j]->data[full(i)] = float(v);
     }
+    sums[j] = sum;
   }
+}
+
+}  // namespace
+
+double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ssim_map) {
   double sum = 0;
-  for (size_t i = 0; i < n; ++i) {
-    if (weight[i] == 0) continue;
-    const double v = per_pixel[i] / a.channels;
-    sum += v;
-    if (ssim_map) ssim_map->data[full(i)] = float(v);
-  }
+  SsimSums(a, {&b}, eval_mask, &sum, {ssim_map});
   return sum;
 }
 
@@ -370,16 +401,35 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
     }
   }
 
+  // Tone maps: SSIM reads them only inside the bounding box of the evaluated pixels (SsimSum);
+  // figures need the photograph and the render everywhere.
+  int bx0 = w, by0 = h, bx1 = -1, by1 = -1;
+  for (size_t i : pixels) {
+    const int x = int(i % size_t(w)), y = int(i / size_t(w));
+    bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
+  }
   Image photo_tm(w, h, 3), render_tm(w, h, 3), scaled_tm(w, h, 3);
-  for (size_t i = 0; i < n; ++i) {
-    for (int c = 0; c < 3; ++c) {
-      photo_tm.data[i * 3 + c] = ToneMap(photo.data[i * 3 + c], inv_mean);
-      render_tm.data[i * 3 + c] = ToneMap(render.data[i * 3 + c], inv_mean);
-      scaled_tm.data[i * 3 + c] = ToneMap(float(score.scale[c] * render.data[i * 3 + c]), inv_mean);
+  for (int y = 0; y < h; ++y) {
+    const bool in_rows = y >= by0 && y <= by1;
+    if (!in_rows && !options.keep_figure_data) continue;
+    for (int x = 0; x < w; ++x) {
+      const bool in_box = in_rows && x >= bx0 && x <= bx1;
+      if (!in_box && !options.keep_figure_data) continue;
+      const size_t i = size_t(y) * w + x;
+      for (int c = 0; c < 3; ++c) {
+        photo_tm.data[i * 3 + c] = ToneMap(photo.data[i * 3 + c], inv_mean);
+        render_tm.data[i * 3 + c] = ToneMap(render.data[i * 3 + c], inv_mean);
+        if (in_box) {
+          scaled_tm.data[i * 3 + c] =
+              ToneMap(float(score.scale[c] * render.data[i * 3 + c]), inv_mean);
+        }
+      }
     }
   }
-  score.raw.ssim_sum = SsimSum(photo_tm, render_tm, eval_mask);
-  score.scaled.ssim_sum = SsimSum(photo_tm, scaled_tm, eval_mask);
+  double ssim_sums[2];
+  SsimSums(photo_tm, {&render_tm, &scaled_tm}, eval_mask, ssim_sums, {nullptr, nullptr});
+  score.raw.ssim_sum = ssim_sums[0];
+  score.scaled.ssim_sum = ssim_sums[1];
 
   if (options.keep_figure_data) {
     score.error = Image(w, h, 1, -1.0f);

@@ -198,6 +198,9 @@ Status ValidateOptions::Validate() const {
   if (!(error_scale >= 0) || !std::isfinite(error_scale)) {
     return InvalidArgumentError("--error-scale must be >= 0 (0 = automatic), got ", error_scale);
   }
+  if (threads < 0 || threads > 1024) {
+    return InvalidArgumentError("threads must be in [0, 1024], got ", threads);
+  }
   if (!(score.erode_px >= 0) || score.erode_px > 64) {
     return InvalidArgumentError("erosion must be in [0, 64] px, got ", score.erode_px);
   }
@@ -311,7 +314,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       errors[size_t(k)] = run();
       progress.Advance();
     }
-  });
+  }, options.threads);
   progress.Finish();
   for (const Status& s : errors) REFLCAP_RETURN_IF_ERROR(s);
   const double score_s = SecondsSince(start);
@@ -398,23 +401,32 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     }
     error_scale = NiceCeil(worst);
   }
-  size_t figures = 0;
+  // Figures, composed and written in parallel (each from its own image's data).
+  std::vector<const Entry*> figure_entries;
   for (const Entry& e : entries) {
-    if (!e.figure || e.score.photo_tm.empty()) continue;
-    const CaptureImage& image = capture.images[e.index];
-    char caption[256];
-    std::snprintf(caption, sizeof caption, "%s  PSNR %s DB  REL RMSE %s  SSIM %s",
-                  image.file.c_str(), Fixed(e.score.raw.PsnrDb(), 2).c_str(),
-                  Fixed(e.score.raw.RelRmse(), 4).c_str(), Fixed(e.score.raw.Ssim(), 3).c_str());
-    const Image figure = ComposeFigure(e.score.photo_tm, e.score.render_tm, e.score.error,
-                                       error_scale, caption);
-    REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "figures" / (e.key + ".png"), figure));
-    if (e.has_aux) {
-      REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "figures" / (e.key + "_regions.png"),
-                                       ComposeRegionMap(e.score.photo_tm, e.score.region_bits)));
-    }
-    ++figures;
+    if (e.figure && !e.score.photo_tm.empty()) figure_entries.push_back(&e);
   }
+  std::vector<Status> figure_errors(figure_entries.size());
+  ParallelFor(0, int64_t(figure_entries.size()), 1, [&](int64_t b, int64_t end, int) {
+    for (int64_t k = b; k < end; ++k) {
+      const Entry& e = *figure_entries[size_t(k)];
+      const CaptureImage& image = capture.images[e.index];
+      char caption[256];
+      std::snprintf(caption, sizeof caption, "%s  PSNR %s DB  REL RMSE %s  SSIM %s",
+                    image.file.c_str(), Fixed(e.score.raw.PsnrDb(), 2).c_str(),
+                    Fixed(e.score.raw.RelRmse(), 4).c_str(), Fixed(e.score.raw.Ssim(), 3).c_str());
+      const Image figure = ComposeFigure(e.score.photo_tm, e.score.render_tm, e.score.error,
+                                         error_scale, caption);
+      Status s = WritePng(out_dir / "figures" / (e.key + ".png"), figure);
+      if (s.ok() && e.has_aux) {
+        s = WritePng(out_dir / "figures" / (e.key + "_regions.png"),
+                     ComposeRegionMap(e.score.photo_tm, e.score.region_bits));
+      }
+      figure_errors[size_t(k)] = s;
+    }
+  }, options.threads);
+  for (const Status& s : figure_errors) REFLCAP_RETURN_IF_ERROR(s);
+  const size_t figures = figure_entries.size();
   const double figures_s = SecondsSince(figures_start);
 
   // Fit and sample sections.

@@ -37,6 +37,10 @@ struct ValidateOptions {
   // over the figure images, rounded up to 1, 2, 2.5 or 5 x 10^k, shared by all figures.
   double error_scale = 0;
   ScoreOptions score;
+  // Threads scoring images (each image reads its files and is scored on one thread) and writing
+  // figures; 0 = one per hardware thread. Results do not depend on it: per-image sums are pooled
+  // in image order. [0, 1024].
+  int threads = 0;
   Status Validate() const;
 };
 

@@ -1,5 +1,8 @@
-// Re-rendering a capture with the Vulkan renderer (see vulkan_render_capture.h).
+// Re-rendering a capture with the Vulkan renderer (see vulkan_render_capture.h): the images go to
+// VulkanRenderer::RenderImages in one call, so they are batched and pipelined.
 #include "render/vulkan/vulkan_render_capture.h"
+
+#include "engine/core/log.h"
 
 namespace reflcap::render {
 
@@ -30,6 +33,25 @@ StatusOr<RenderResult> RenderCaptureImageVulkan(VulkanRenderer& renderer,
   return result;
 }
 
+Status RenderCaptureImagesVulkan(VulkanRenderer& renderer, const FittedCapture& fitted,
+                                 const std::vector<size_t>& indices, const RenderOptions& options,
+                                 const CaptureRenderBackend::Sink& sink) {
+  const Capture& capture = *fitted.capture;
+  std::vector<RenderRequest> requests(indices.size());
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
+    REFLCAP_CHECK(index < capture.images.size());
+    const CaptureImage& image = capture.images[index];
+    RenderRequest& q = requests[k];
+    q.camera = &capture.cameras[image.camera];
+    q.light = &capture.lights[image.light];
+    q.world_from_object = capture.WorldFromObject(image);
+    q.exposure_s = image.exposure_s;
+    q.label = StrCat(capture.json_path.string(), ": images[", index, "]");
+  }
+  return renderer.RenderImages(requests, options, sink);
+}
+
 CaptureRenderBackend VulkanCaptureRenderBackend(VulkanRenderer& renderer) {
   CaptureRenderBackend b;
   b.backend = "vulkan";
@@ -52,6 +74,11 @@ CaptureRenderBackend VulkanCaptureRenderBackend(VulkanRenderer& renderer) {
   b.render = [&renderer](const FittedCapture& fitted, size_t index, const RenderOptions& options) {
     return RenderCaptureImageVulkan(renderer, fitted, index, options);
   };
+  b.render_many = [&renderer](const FittedCapture& fitted, const std::vector<size_t>& indices,
+                              const RenderOptions& options,
+                              const CaptureRenderBackend::Sink& sink) {
+    return RenderCaptureImagesVulkan(renderer, fitted, indices, options, sink);
+  };
   return b;
 }
 
@@ -61,6 +88,28 @@ StatusOr<CaptureRenderSummary> RenderCaptureVulkan(const Capture& capture,
                                                    const CaptureRenderOptions& options,
                                                    VulkanRenderer& renderer) {
   return RenderCapture(capture, params_exr, out_dir, options, VulkanCaptureRenderBackend(renderer));
+}
+
+StatusOr<CaptureRenderSummary> RenderCaptureOnFitDevice(const Capture& capture,
+                                                        const std::filesystem::path& params_exr,
+                                                        const std::filesystem::path& out_dir,
+                                                        const CaptureRenderOptions& options,
+                                                        const std::string& device) {
+  auto renderer = VulkanRenderer::Create(device);
+  if (!renderer.ok()) {
+    // E.g. a compute-only device: the fit ran there, rasterisation cannot.
+    REFLCAP_LOG(kWarning) << "render: no Vulkan renderer on the fit's device ("
+                          << renderer.status().message()
+                          << "); rendering with the CPU reference renderer";
+    return RenderCapture(capture, params_exr, out_dir, options);
+  }
+  if ((*renderer)->device().IsSoftware()) {
+    REFLCAP_LOG(kInfo) << "render: " << (*renderer)->device().name
+                       << " is a CPU device; rendering with the CPU reference renderer";
+    renderer->reset();
+    return RenderCapture(capture, params_exr, out_dir, options);
+  }
+  return RenderCaptureVulkan(capture, params_exr, out_dir, options, **renderer);
 }
 
 }  // namespace reflcap::render

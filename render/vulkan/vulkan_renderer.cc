@@ -1,6 +1,8 @@
-// The Vulkan renderer (see vulkan_renderer.h): scene upload, per-image parameters (camera and
-// light in the object frame, shadow views), and the recording of the shadow, camera, visibility,
-// resolve and box-filter passes into one submission per image.
+// The Vulkan renderer (see vulkan_renderer.h): scene upload; per-image plans (camera and light in
+// the object frame, shadow views, pass sizes), computed for every image before anything renders;
+// batches of images recorded into one submission each — shadow, camera, visibility, resolve and
+// box-filter passes per image, each with its own parameter blocks and output buffers — with
+// several submissions in flight; and the parallel read-back into RenderResults.
 #include "render/vulkan/vulkan_renderer.h"
 
 #include <algorithm>
@@ -8,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <utility>
 #include <vector>
 
@@ -19,7 +22,9 @@
 #include "engine/gpu/vk_graphics_pipeline.h"
 #include "engine/gpu/vk_image.h"
 #include "engine/gpu/vk_view.h"
+#include "engine/core/parallel.h"
 #include "engine/mesh/ray_scene.h"
+#include "engine/core/worker_pool.h"
 #include "shaders/shared/render_params.h"
 
 namespace reflcap::render {
@@ -53,6 +58,18 @@ constexpr int kVisibilityMargin = 2;
 // distortion is too strong for an undistorted pinhole render (fisheye lenses).
 constexpr int kMaxVisibilitySide = 16384;
 constexpr double kMaxVisibilityRatio = 8;
+// Kept pass targets of other sizes than the current batch needs, per kind, before idle ones are
+// released (captures have a few camera sizes; more means sizes vary image to image).
+constexpr size_t kMaxIdleTargets = 8;
+// Parameter blocks are written by vkCmdUpdateBuffer: at most 65536 bytes, a multiple of 4.
+static_assert(sizeof(gpu::shared::RenderParams) % 4 == 0 &&
+              sizeof(gpu::shared::RenderParams) <= 65536);
+// Margin of the read-back rectangle around the projected bounding box, px: covers float rounding
+// of the projection (and the rasteriser's sub-pixel snapping) many times over.
+constexpr double kRectMarginPx = 2;
+// Read-back work per task: rows of this many pixels at least (a task should outweigh the
+// hand-over to a worker, ~microseconds).
+constexpr int kReadbackPixelsPerTask = 16384;
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -161,29 +178,144 @@ Status VulkanRenderOptions::Validate() const {
   if (visibility_scale != 1 && visibility_scale != 2) {
     return InvalidArgumentError("visibility_scale must be 1 or 2, got ", visibility_scale);
   }
+  if (batch_images < 0 || batch_images > kMaxBatchImages) {
+    return InvalidArgumentError("batch_images must be in [0, ", kMaxBatchImages, "], got ",
+                                batch_images);
+  }
+  if (batch_readback_mib < 1 || batch_readback_mib > 4096) {
+    return InvalidArgumentError("batch_readback_mib must be in [1, 4096], got ",
+                                batch_readback_mib);
+  }
+  if (batches_in_flight < 1 || batches_in_flight > 8) {
+    return InvalidArgumentError("batches_in_flight must be in [1, 8], got ", batches_in_flight);
+  }
+  if (shadow_cache_mib < 0 || shadow_cache_mib > 16384) {
+    return InvalidArgumentError("shadow_cache_mib must be in [0, 16384], got ", shadow_cache_mib);
+  }
   return OkStatus();
 }
 
+std::string VulkanBatchStats::ToString() const {
+  return StrCat(images, " images in ", submissions, " submissions, ", seconds, " s (record ",
+                record_s, " s, wait ", wait_s, " s, read-back ", readback_s, " s, sink ", sink_s,
+                " s); shadow maps drawn ", shadow_maps_drawn, ", reused ", shadow_maps_reused);
+}
+
 // ---- Impl -----------------------------------------------------------------------------------
+
+namespace {
+
+// Everything one image needs, computed on the host before anything is recorded.
+struct ImagePlan {
+  bool normal_map = false;
+  int width = 0, height = 0, supersampling = 1;
+  bool distorted = false;
+  bool aux = false;  // RenderOptions::aux_buffers
+  uint32_t shadow_views = 0;
+  int shadow_resolution = 0;
+  int vis_width = 0, vis_height = 0;
+  // Pixels the 1x camera pass can cover (the projected bounding box of the mesh, with a margin):
+  // only they are read back; every other pixel is background (0) without looking.
+  int rect_x0 = 0, rect_y0 = 0, rect_w = 0, rect_h = 0;
+  sh::RenderParams params{};        // shadow, 1x camera (or visibility + resolve), normal map
+  sh::RenderParams hires_params{};  // the supersampled camera pass (Supersampled())
+  VulkanRenderStats stats;          // shadow map and visibility of this image
+
+  bool Supersampled() const { return !normal_map && !distorted && supersampling > 1; }
+  uint64_t OutBytes() const { return uint64_t(width) * uint64_t(height) * 16; }
+  // Host-visible output memory: radiance, aux, and the 1x pass when supersampled.
+  uint64_t ReadbackBytes() const { return OutBytes() * (Supersampled() ? 3 : 2); }
+  // What a shadow map drawn for this image holds: its views and resolution, as bytes.
+  std::vector<uint8_t> ShadowContent() const {
+    std::vector<uint8_t> key(sizeof(sh::LightMapView) * shadow_views + 2 * sizeof(uint32_t));
+    const uint32_t shape[2] = {shadow_views, uint32_t(shadow_resolution)};
+    std::memcpy(key.data(), shape, sizeof(shape));
+    std::memcpy(key.data() + sizeof(shape), params.views, sizeof(sh::LightMapView) * shadow_views);
+    return key;
+  }
+};
+
+// A pass target kept between images (and batches) with what it holds.
+struct CachedTarget {
+  std::unique_ptr<PassTarget> target;
+  uint32_t width = 0, height = 0, layers = 0;
+  std::vector<uint8_t> content;  // shadow maps: ShadowContent of the last map drawn; empty: none
+  uint64_t last_use = 0;         // Impl::use_counter at the last use (LRU)
+  uint64_t batch = 0;            // the last batch (Impl::batch_counter) recorded with it
+  uint64_t Bytes() const { return uint64_t(width) * height * layers * 4; }
+};
+
+// Image k of a Flight: its descriptor sets (created on first use) and output buffers.
+struct Slot {
+  std::unique_ptr<DescriptorSet> light, camera, hires, resolve, downsample, normal_map;
+  std::unique_ptr<Buffer> out_radiance, out_aux, out_mask;
+};
+
+// One submission: command buffer and fence, the images' parameter blocks (two per image,
+// Impl::params_stride apart: the 1x and the supersampled pass; in device memory, written by the
+// submission itself, so a discrete GPU's shaders never read them across the bus), and its slots.
+struct Flight {
+  gpu::CommandBuffer cmd;  // submitted without waiting (Submit / Wait): batches in flight
+  std::unique_ptr<Buffer> params;
+  uint64_t params_capacity = 0;  // bytes
+  std::vector<Slot> slots;
+  std::vector<size_t> images;  // plan indices, in slot order; empty when idle
+  uint64_t batch = 0;
+};
+
+Status EnsureSet(gpu::VkContext& ctx, std::unique_ptr<DescriptorSet>* set,
+                 const DescriptorSetLayout& layout) {
+  if (*set != nullptr) return OkStatus();
+  REFLCAP_ASSIGN_OR_RETURN(DescriptorSet s, DescriptorSet::Create(ctx, layout));
+  *set = std::make_unique<DescriptorSet>(std::move(s));
+  return OkStatus();
+}
+
+// Records a copy of the rectangle (x0, y0, w, h) of `image` (one layer, RGBA32F) into `dst` laid
+// out as the whole image (rows of image.width() texels from offset 0); the rest of dst is left
+// as it was.
+void RecordCopyToBuffer(VkCommandBuffer cb, DeviceImage& image, const Buffer& dst, int x0, int y0,
+                        int w, int h) {
+  image.TransitionTo(cb, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL);
+  if (w <= 0 || h <= 0) return;
+  VkBufferImageCopy region{};
+  region.bufferOffset = (uint64_t(y0) * image.width() + uint64_t(x0)) * 16;
+  region.bufferRowLength = image.width();
+  region.imageSubresource = {image.aspect(), 0, 0, 1};
+  region.imageOffset = {x0, y0, 0};
+  region.imageExtent = {uint32_t(w), uint32_t(h), 1};
+  vkCmdCopyImageToBuffer(cb, image.handle(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, dst.handle(), 1,
+                         &region);
+}
+
+// Transfer writes (fills) finish and are visible before later compute shaders write or read.
+void RecordTransferToCompute(VkCommandBuffer cb) {
+  VkMemoryBarrier barrier{};
+  barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+  barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
+                       1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+}  // namespace
 
 struct VulkanRenderer::Impl {
   std::unique_ptr<gpu::VkContext> owned_ctx;
   gpu::VkContext* ctx = nullptr;
   VulkanRenderOptions options;
   VulkanRenderStats stats;
-  gpu::CommandBuffer cmd;
+  VulkanBatchStats batch_stats;
+  gpu::CommandBuffer cmd;  // scene uploads
   gpu::Sampler sampler;
 
-  // Descriptor set layouts and sets, one per pass.
-  gpu::LightMapPass shadow_pass;  // shadow maps; its set (params, corners) also serves visibility
-  DescriptorSetLayout camera_layout, resolve_layout, downsample_layout,
+  // Descriptor set layouts, one per pass (the light layout — params + corners — serves the
+  // shadow and the visibility pass), and the pipelines.
+  DescriptorSetLayout light_layout, camera_layout, resolve_layout, downsample_layout,
       normal_map_layout;
-  DescriptorSet camera_set, resolve_set, downsample_set, normal_map_set;
-  Pipeline depth_pipeline, camera_pipeline, visibility_pipeline, resolve_pipeline,
-      downsample_pipeline, normal_map_pipeline;
+  Pipeline shadow_pipeline, depth_pipeline, camera_pipeline, visibility_pipeline,
+      resolve_pipeline, downsample_pipeline, normal_map_pipeline;
 
-  // Per-image parameters (host-visible).
-  std::unique_ptr<Buffer> params;
   // Scene.
   enum class SceneKind { kNone, kMesh, kNormalMap } scene_kind = SceneKind::kNone;
   std::unique_ptr<Buffer> corners, triangles, normal_map_texels;
@@ -193,31 +325,58 @@ struct VulkanRenderer::Impl {
   int num_lobes = 0;
   int atlas_width = 0, atlas_height = 0;
   Vec3d sphere_centre = Vec3d::Zero();  // object frame
+  Eigen::AlignedBox3d bounds;           // the mesh's bounding box, object frame
   double sphere_radius = 0;
   double surface_offset = 0;
-  // Pass targets.
-  std::unique_ptr<PassTarget> camera, camera_hires, visibility;
-  // Outputs (host-visible): radiance (rgb, a = mask), aux, and the 1x pass radiance+mask when the
-  // main pass is supersampled.
-  std::unique_ptr<Buffer> out_radiance, out_aux, out_mask;
+
+  // Pass targets, shared by every image and batch: the queue orders their reuse.
+  std::vector<std::unique_ptr<CachedTarget>> shadow_maps, camera_targets, hires_targets,
+      visibility_targets;
+  uint64_t use_counter = 0, batch_counter = 0;
+
+  // Submissions: a ring of Flights, those in flight oldest first.
+  std::vector<std::unique_ptr<Flight>> flights;
+  size_t next_flight = 0;
+  std::deque<Flight*> in_flight;
+  uint64_t params_stride = 0;
+  std::unique_ptr<WorkerPool> readback_pool;
+  // The plans and sink of the RenderPlans call in progress (Drain delivers their images).
+  const std::vector<ImagePlan>* plans = nullptr;
+  const RenderSink* sink = nullptr;
 
   Status Init(const VulkanRenderOptions& o);
-  Status EnsureCameraPipelines();
-  Status EnsureTarget(std::unique_ptr<PassTarget>* target, uint32_t w, uint32_t h,
-                      const std::vector<VkFormat>& formats, VkImageLayout final_layout);
   Status UploadMaterial(const TexelAtlas& atlas, const BrdfMaps& maps);
-  Status WriteParams(const sh::RenderParams& p) {
-    std::memcpy(params->mapped(), &p, sizeof(p));
-    return OkStatus();
+  StatusOr<ImagePlan> PlanMeshImage(const Camera& camera, const Light& light,
+                                    const Rigid3& world_from_object, double exposure_s,
+                                    const RenderOptions& options) const;
+  StatusOr<ImagePlan> PlanNormalMapImage(const Camera& camera, const Light& light,
+                                         double exposure_s, const RenderOptions& options) const;
+  // Renders `plans` in batches and hands each result to `sink`, in order.
+  Status RenderPlans(const std::vector<ImagePlan>& plans, const RenderSink& sink);
+  Status RecordImage(Flight& flight, size_t k, const ImagePlan& plan);
+  Status RecordMeshImage(Flight& flight, size_t k, const ImagePlan& plan);
+  Status RecordNormalMapImage(Flight& flight, size_t k, const ImagePlan& plan);
+  // Waits for the oldest submission, reads its images back and hands them to the sink.
+  Status CompleteOldest();
+  Status Drain();
+  // After an error: waits for whatever was submitted, forgets it and every kept shadow map's
+  // content (a map recorded but never submitted was not drawn).
+  void Abandon();
+  StatusOr<CachedTarget*> AcquireTarget(std::vector<std::unique_ptr<CachedTarget>>* cache,
+                                        uint32_t w, uint32_t h,
+                                        const std::vector<VkFormat>& formats,
+                                        VkImageLayout final_layout);
+  // The shadow map of `plan`: a kept one holding exactly its views (*reused), else one to draw.
+  StatusOr<CachedTarget*> AcquireShadowMap(const ImagePlan& plan, bool* reused);
+  // Releases kept targets that the batch being recorded does not use, once nothing submitted
+  // can still use them (drains the submissions first).
+  Status ReleaseIdle(std::vector<std::unique_ptr<CachedTarget>>* cache);
+  Status EnsurePipelines();
+  void Draw(VkCommandBuffer cb, const Pipeline& pipeline, const DescriptorSet& set) {
+    pipeline.Bind(cb, set.handle());
+    vkCmdDraw(cb, 3 * triangle_count, 1, 0, 0);
   }
-  void Draw(const Pipeline& pipeline, const DescriptorSet& set, const void* push,
-            uint32_t push_bytes) {
-    pipeline.Bind(cmd.handle(), set.handle());
-    if (push_bytes > 0) pipeline.Push(cmd.handle(), push, push_bytes);
-    vkCmdDraw(cmd.handle(), 3 * triangle_count, 1, 0, 0);
-  }
-  StatusOr<RenderResult> Assemble(int w, int h, bool aux_buffers, const Buffer& radiance,
-                                  const Buffer& aux, const Buffer* mask_source);
+  void ReadBack(const Flight& flight, std::vector<RenderResult>* results);
 };
 
 Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
@@ -229,10 +388,9 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
   REFLCAP_RETURN_IF_ERROR(gpu::CheckPassFormats(
       c, {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_UINT}, "camera passes and shadow maps"));
 
-  REFLCAP_ASSIGN_OR_RETURN(
-      shadow_pass, gpu::LightMapPass::Create(c, {gpu::ShaderId::kRenderShadowVert,
-                                                 gpu::ShaderId::kRenderShadowFrag, kBindParams,
-                                                 kBindCorners}));
+  REFLCAP_ASSIGN_OR_RETURN(light_layout, DescriptorSetLayout::Create(
+                                             c, {{kBindParams, kSsbo, kGfx},
+                                                 {kBindCorners, kSsbo, kGfx}}));
   REFLCAP_ASSIGN_OR_RETURN(camera_layout,
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx},
                                                            {kBindCorners, kSsbo, kGfx},
@@ -259,10 +417,6 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
                                                            {kBindOutRadiance, kSsbo, kComp},
                                                            {kBindOutAux, kSsbo, kComp},
                                                            {kBindNormalMapTexels, kSsbo, kComp}}));
-  REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
-  REFLCAP_ASSIGN_OR_RETURN(resolve_set, DescriptorSet::Create(c, resolve_layout));
-  REFLCAP_ASSIGN_OR_RETURN(downsample_set, DescriptorSet::Create(c, downsample_layout));
-  REFLCAP_ASSIGN_OR_RETURN(normal_map_set, DescriptorSet::Create(c, normal_map_layout));
 
   REFLCAP_ASSIGN_OR_RETURN(
       resolve_pipeline,
@@ -279,7 +433,9 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
                                                        uint32_t(sizeof(sh::NormalMapPush)),
                                                        {}}));
 
-  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(c, &params, sizeof(sh::RenderParams)));
+  // Parameter blocks of one flight sit at this stride (bindable offsets).
+  const uint64_t align = std::max<uint64_t>(1, c.info().min_storage_buffer_offset_alignment);
+  params_stride = (sizeof(sh::RenderParams) + align - 1) / align * align;
   // A 1x1 stand-in bound as the shadow map when a pass draws no shadows.
   gpu::ImageOptions o1;
   o1.width = o1.height = 1;
@@ -293,42 +449,42 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
   return OkStatus();
 }
 
-Status VulkanRenderer::Impl::EnsureTarget(std::unique_ptr<PassTarget>* target, uint32_t w,
-                                          uint32_t h, const std::vector<VkFormat>& formats,
-                                          VkImageLayout final_layout) {
-  if (*target != nullptr && (*target)->width == w && (*target)->height == h) return OkStatus();
-  target->reset();
-  REFLCAP_ASSIGN_OR_RETURN(*target,
-                           MakePassTarget(*ctx, w, h, 1, formats, final_layout, false));
-  return OkStatus();
-}
-
-Status VulkanRenderer::Impl::EnsureCameraPipelines() {
-  if (camera_pipeline.handle() == VK_NULL_HANDLE && camera != nullptr) {
+Status VulkanRenderer::Impl::EnsurePipelines() {
+  // Each pipeline is made with the first target of its kind: render passes of other sizes (and
+  // layer counts) with the same formats are compatible with it.
+  if (depth_pipeline.handle() == VK_NULL_HANDLE && !camera_targets.empty()) {
     // Depth pre-pass, then shading with depth EQUAL: every pixel is shaded once, by its nearest
     // surface (the full shading is what costs, on lavapipe above all).
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kRenderSurfaceVert;
     o.set_layout = camera_layout.handle();
     o.color_writes = false;
-    REFLCAP_ASSIGN_OR_RETURN(depth_pipeline, Pipeline::CreateGraphics(*ctx, o, camera->target));
+    const gpu::RenderTarget& target = camera_targets.front()->target->target;
+    REFLCAP_ASSIGN_OR_RETURN(depth_pipeline, Pipeline::CreateGraphics(*ctx, o, target));
     o.fragment = gpu::ShaderId::kRenderSurfaceFrag;
     o.color_writes = true;
     o.depth_compare = VK_COMPARE_OP_EQUAL;
     o.depth_write = false;
-    REFLCAP_ASSIGN_OR_RETURN(camera_pipeline, Pipeline::CreateGraphics(*ctx, o, camera->target));
+    REFLCAP_ASSIGN_OR_RETURN(camera_pipeline, Pipeline::CreateGraphics(*ctx, o, target));
   }
-  if (visibility_pipeline.handle() == VK_NULL_HANDLE && visibility != nullptr) {
+  if (visibility_pipeline.handle() == VK_NULL_HANDLE && !visibility_targets.empty()) {
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kRenderSurfaceVert;
     o.fragment = gpu::ShaderId::kRenderVisibilityFrag;
-    o.set_layout = shadow_pass.layout().handle();  // params + corners
-    REFLCAP_ASSIGN_OR_RETURN(visibility_pipeline,
-                             Pipeline::CreateGraphics(*ctx, o, visibility->target));
+    o.set_layout = light_layout.handle();  // params + corners
+    REFLCAP_ASSIGN_OR_RETURN(
+        visibility_pipeline,
+        Pipeline::CreateGraphics(*ctx, o, visibility_targets.front()->target->target));
+  }
+  if (shadow_pipeline.handle() == VK_NULL_HANDLE && !shadow_maps.empty()) {
+    REFLCAP_ASSIGN_OR_RETURN(
+        shadow_pipeline,
+        gpu::CreateLightMapPipeline(*ctx, gpu::ShaderId::kRenderShadowVert,
+                                    gpu::ShaderId::kRenderShadowFrag, light_layout.handle(),
+                                    shadow_maps.front()->target->target));
   }
   return OkStatus();
 }
-
 Status VulkanRenderer::Impl::UploadMaterial(const TexelAtlas& atlas, const BrdfMaps& maps) {
   if (maps.texels.size() != atlas.TexelCount()) {
     return InvalidArgumentError("parameter maps have ", maps.texels.size(), " texels, the atlas ",
@@ -387,30 +543,689 @@ Status VulkanRenderer::Impl::UploadMaterial(const TexelAtlas& atlas, const BrdfM
   return OkStatus();
 }
 
-StatusOr<RenderResult> VulkanRenderer::Impl::Assemble(int w, int h, bool aux_buffers,
-                                                      const Buffer& radiance, const Buffer& aux,
-                                                      const Buffer* mask_source) {
-  RenderResult result{Image(w, h, 3, 0.0f), Image(w, h, 1, 0.0f), Image()};
-  if (aux_buffers) result.aux = Image(w, h, kAuxChannelCount, 0.0f);
-  const float* rad = static_cast<const float*>(radiance.mapped());
-  const float* ax = static_cast<const float*>(aux.mapped());
-  const float* mask =
-      static_cast<const float*>(mask_source ? mask_source->mapped() : radiance.mapped());
-  const size_t n = size_t(w) * h;
-  for (size_t i = 0; i < n; ++i) {
-    for (int c = 0; c < 3; ++c) result.pixels.data[i * 3 + c] = rad[i * 4 + c];
-    const float m = mask[i * 4 + 3] > 0.5f ? 1.0f : 0.0f;
-    result.mask.data[i] = m;
-    if (aux_buffers) {
-      float* a = &result.aux.data[i * kAuxChannelCount];
-      a[kAuxCastShadow] = ax[i * 4 + 0];
-      a[kAuxCosThetaI] = ax[i * 4 + 1];
-      a[kAuxCosThetaO] = ax[i * 4 + 2];
-      a[kAuxCurvature] = ax[i * 4 + 3];
-      a[kAuxMask] = m;
+StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, const Light& light,
+                                                        const Rigid3& world_from_object,
+                                                        double exposure_s,
+                                                        const RenderOptions& options) const {
+  const bool pinhole = camera.model == CameraModel::kPinhole;
+  if (!pinhole && !(camera.pixel_size_m > 0)) {
+    return InvalidArgumentError("camera \"", camera.id,
+                                "\": orthographic rendering needs pixel_size_m");
+  }
+  if (camera.width <= 0 || camera.height <= 0) {
+    return InvalidArgumentError("camera \"", camera.id, "\" has no pixels");
+  }
+  ImagePlan plan;
+  const int w = camera.width, h = camera.height, n = options.supersampling;
+  const bool distorted = pinhole && (camera.HasDistortion() || this->options.always_resolve);
+  const bool point_light = light.type == LightType::kPoint;
+  plan.width = w;
+  plan.height = h;
+  plan.supersampling = n;
+  plan.distorted = distorted;
+  plan.aux = options.aux_buffers;
+
+  // Camera and light in the object frame.
+  const Rigid3 cam_from_object = camera.cam_from_world * world_from_object;
+  const Rigid3 object_from_cam = cam_from_object.Inverse();
+  const Rigid3 object_from_world = world_from_object.Inverse();
+  const Vec3d light_in_object = object_from_world * light.position;
+  const Vec3d light_dir_in_object = (object_from_world.rotation * light.direction).normalized();
+  const Vec3d centre = sphere_centre;
+  const double radius = sphere_radius;
+  const double centre_z = (cam_from_object * centre).z();
+  // Depth range of the object in front of the camera (pinhole: beyond a sliver in front of the
+  // centre; orthographic: rays start on the plane z = 0, as the CPU's do).
+  double near = 0, far = 0;
+  gpu::CameraDepthRange(pinhole, centre_z, radius, &near, &far);
+
+  sh::RenderParams& p = plan.params;
+  const double fx = camera.K(0, 0), fy = camera.K(1, 1), s = camera.K(0, 1), cx = camera.K(0, 2),
+               cy = camera.K(1, 2);
+  const Mat4d object_to_cam = Homogeneous(cam_from_object);
+  auto clip_for_scale = [&](int scale) -> Mat4d {
+    if (!pinhole) {
+      return OrthoClipFromCam(camera.pixel_size_m / scale, w * scale, h * scale, near, far) *
+             object_to_cam;
+    }
+    return PinholeClipFromCam(fx * scale, fy * scale, s * scale, scale * (cx + 0.5) - 0.5,
+                              scale * (cy + 0.5) - 0.5, w * scale, h * scale, near, far) *
+           object_to_cam;
+  };
+  SetRows(clip_for_scale(1), p.clip_from_object);
+  p.camera_origin = V4(object_from_cam.translation, 1);
+  p.camera_axis = V4(object_from_cam.rotation.col(2), 0);
+  for (int r = 0; r < 3; ++r)
+    p.object_from_cam[r] = V4(object_from_cam.rotation.row(r).transpose(), 0);
+  p.light = point_light ? V4(light_in_object, 1) : V4(light_dir_in_object, 0);
+  p.intensity = V4(light.intensity, exposure_s);
+  p.intrinsics = {float(fx), float(fy), float(cx), float(cy)};
+  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 1, 0};  // z: 1 sample per side
+  p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
+                  float(camera.dist[3])};
+  p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
+  p.flags = (pinhole ? sh::kRenderFlagPinhole : 0u) |
+            (point_light ? sh::kRenderFlagPointLight : 0u) |
+            (distorted ? sh::kRenderFlagDistortion : 0u);
+  p.num_lobes = uint32_t(num_lobes);
+  p.params_per_channel = uint32_t(brdf::ParamsPerChannel(num_lobes));
+  p.atlas_width = uint32_t(atlas_width);
+  p.atlas_height = uint32_t(atlas_height);
+  p.width = uint32_t(w);
+  p.height = uint32_t(h);
+  p.supersampling = uint32_t(n);
+
+  // Shadow views.
+  const VulkanRenderOptions& vo = this->options;
+  const double pixel_m = pinhole ? std::max(centre_z, radius) / fx : camera.pixel_size_m;
+  gpu::LightMapResolution resolution;
+  resolution.texels_per_pixel = vo.shadow_texels_per_pixel;
+  resolution.pixel_m = pixel_m;
+  resolution.min_resolution = vo.min_shadow_resolution;
+  resolution.max_resolution = vo.max_shadow_resolution;
+  resolution.max_cube_resolution = vo.max_cube_resolution;
+  resolution.fixed = vo.shadow_resolution;
+  uint32_t views = 0;
+  int res = 0;
+  if (options.cast_shadows) {
+    gpu::LightMapShape shape = gpu::LightMapShape::kAuto;
+    if (vo.shadow_map == ShadowMapKind::kCube) shape = gpu::LightMapShape::kCube;
+    if (vo.shadow_map == ShadowMapKind::kFitted) shape = gpu::LightMapShape::kFitted;
+    REFLCAP_ASSIGN_OR_RETURN(
+        const gpu::LightMapPlan light_map,
+        gpu::PlanLightMap(point_light, light_in_object, light_dir_in_object, centre, radius, shape,
+                          resolution));
+    std::copy(light_map.views, light_map.views + light_map.view_count, p.views);
+    views = light_map.view_count;
+    res = light_map.resolution;
+    plan.stats.shadow_map = light_map.kind;
+    p.flags |= sh::kRenderFlagCastShadows;
+    plan.stats.shadow_resolution = res;
+  }
+  p.num_shadow_views = views;
+  p.shadow_resolution = uint32_t(res);
+  p.shadow_bias = {float(surface_offset), float(vo.shadow_bias_texels),
+                   float(vo.shadow_plane_limit_texels), 0};
+  plan.shadow_views = views;
+  plan.shadow_resolution = res;
+
+  if (distorted) {
+    // Visibility image of a distorted camera: the undistorted footprint of the image's border
+    // (pixel edges, ±0.5 px), in normalised coordinates, at visibility_scale texels per pixel.
+    double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
+    bool finite = true;  // a border point without an undistortion (beyond the lens model's fold)
+    auto extend = [&](double u, double v) {
+      const double yd = (v - cy) / fy;
+      const double xd = (u - cx - s * yd) / fx;
+      const Vec2d xy = camera.Undistort({xd, yd});
+      finite = finite && std::isfinite(xy.x()) && std::isfinite(xy.y());
+      xmin = std::min(xmin, xy.x());
+      xmax = std::max(xmax, xy.x());
+      ymin = std::min(ymin, xy.y());
+      ymax = std::max(ymax, xy.y());
+    };
+    for (int x = 0; x <= w; ++x) {
+      extend(x - 0.5, -0.5);
+      extend(x - 0.5, h - 0.5);
+    }
+    for (int y = 0; y <= h; ++y) {
+      extend(-0.5, y - 0.5);
+      extend(w - 0.5, y - 0.5);
+    }
+    const int scale = vo.visibility_scale;
+    const double vfx = fx * scale, vfy = fy * scale, vs = s * scale;
+    const double u0 = std::min({vfx * xmin + vs * ymin, vfx * xmin + vs * ymax});
+    const double u1 = std::max({vfx * xmax + vs * ymin, vfx * xmax + vs * ymax});
+    const double vcx = kVisibilityMargin - u0;
+    const double vcy = kVisibilityMargin - vfy * ymin;
+    const double width_d = std::ceil(u1 - u0) + 2 * kVisibilityMargin + 1;
+    const double height_d = std::ceil(vfy * (ymax - ymin)) + 2 * kVisibilityMargin + 1;
+    if (!(finite && width_d >= 1 && height_d >= 1 && width_d <= kMaxVisibilitySide &&
+          height_d <= kMaxVisibilitySide &&
+          width_d <= kMaxVisibilityRatio * scale * w + 64 &&
+          height_d <= kMaxVisibilityRatio * scale * h + 64)) {
+      return InvalidArgumentError("camera \"", camera.id,
+                                  "\": its distortion spreads the image "
+                                  "over an undistorted footprint of ",
+                                  width_d, "x", height_d,
+                                  " px, too wide for the Vulkan renderer's pinhole rasterisation");
+    }
+    const int vis_w = int(width_d), vis_h = int(height_d);
+    p.vis_intrinsics = {float(vfx), float(vfy), float(vcx), float(vcy)};
+    p.vis_intrinsics_extra = {float(vs), 0, 0, 0};
+    p.vis_width = uint32_t(vis_w);
+    p.vis_height = uint32_t(vis_h);
+    plan.vis_width = vis_w;
+    plan.vis_height = vis_h;
+    plan.stats.distortion_resolve = true;
+    plan.stats.visibility_width = vis_w;
+    plan.stats.visibility_height = vis_h;
+    // The visibility pass uses clip_from_object of the visibility image; the resolve reads the
+    // output camera's intrinsics. One params block serves both: the vertex stage reads
+    // clip_from_object, which for a distorted camera is the visibility projection.
+    SetRows(PinholeClipFromCam(vfx, vfy, vs, vcx, vcy, vis_w, vis_h, near, far) * object_to_cam,
+            p.clip_from_object);
+  }
+  // Pixel weight: the camera pass shades one sample per pixel (the supersampled pass below sets
+  // its own); the resolve sums N x N samples.
+  p.intensity.w = float(distorted ? exposure_s / (double(n) * n) : exposure_s);
+  plan.rect_w = w;
+  plan.rect_h = h;
+  if (!distorted && n == 1) {
+    // A fragment covers a pixel centre inside the projection of its triangle, which lies inside
+    // the projection of the mesh's bounding box (convex; all of it in front of the camera, else
+    // the whole image is kept).
+    double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
+    bool bounded = true;
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3d q = cam_from_object * bounds.corner(Eigen::AlignedBox3d::CornerType(corner));
+      double u, v;
+      if (pinhole) {
+        if (!(q.z() > 1e-9 * radius)) {
+          bounded = false;
+          break;
+        }
+        u = fx * q.x() / q.z() + s * q.y() / q.z() + cx;
+        v = fy * q.y() / q.z() + cy;
+      } else {
+        u = q.x() / camera.pixel_size_m + 0.5 * (w - 1);
+        v = q.y() / camera.pixel_size_m + 0.5 * (h - 1);
+      }
+      u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
+    }
+    if (bounded && std::isfinite(u0) && std::isfinite(u1) && std::isfinite(v0) &&
+        std::isfinite(v1)) {
+      const double x0 = std::clamp(std::floor(u0) - kRectMarginPx, 0.0, double(w));
+      const double x1 = std::clamp(std::ceil(u1) + kRectMarginPx + 1, 0.0, double(w));
+      const double y0 = std::clamp(std::floor(v0) - kRectMarginPx, 0.0, double(h));
+      const double y1 = std::clamp(std::ceil(v1) + kRectMarginPx + 1, 0.0, double(h));
+      plan.rect_x0 = int(x0);
+      plan.rect_y0 = int(y0);
+      plan.rect_w = int(x1) - int(x0);
+      plan.rect_h = int(y1) - int(y0);
     }
   }
-  return result;
+  if (plan.Supersampled()) {
+    // Supersampled pass: N x N the resolution (stratum centres), each fragment weighted
+    // exposure / N², box-filtered into the radiance output; mask and aux come from the 1x pass.
+    sh::RenderParams& q = plan.hires_params;
+    q = p;
+    SetRows(clip_for_scale(n), q.clip_from_object);
+    q.intrinsics_extra.z = float(n);  // surface.frag: fragment -> stratum centre
+    q.intensity.w = float(exposure_s / (double(n) * n));
+  }
+  return plan;
+}
+
+StatusOr<ImagePlan> VulkanRenderer::Impl::PlanNormalMapImage(const Camera& camera,
+                                                             const Light& light, double exposure_s,
+                                                             const RenderOptions& options) const {
+  if (atlas_width != camera.width || atlas_height != camera.height) {
+    return InvalidArgumentError("camera \"", camera.id, "\" is ", camera.width, "x", camera.height,
+                                " but the normal map is ", atlas_width, "x", atlas_height);
+  }
+  if (light.type != LightType::kDirectional) {
+    return InvalidArgumentError("light \"", light.id,
+                                "\": normal-map captures are rendered with directional lights "
+                                "only (the surface positions are unknown)");
+  }
+  ImagePlan plan;
+  plan.normal_map = true;
+  const int w = camera.width, h = camera.height;
+  plan.width = w;
+  plan.height = h;
+  plan.rect_w = w;
+  plan.rect_h = h;
+  plan.aux = options.aux_buffers;
+  const bool pinhole = camera.model == CameraModel::kPinhole;
+  const Rigid3 world_from_cam = camera.cam_from_world.Inverse();
+  sh::RenderParams& p = plan.params;
+  p.camera_axis = V4(camera.AxisInWorld(), 0);
+  for (int r = 0; r < 3; ++r)
+    p.object_from_cam[r] = V4(world_from_cam.rotation.row(r).transpose(), 0);
+  p.light = V4(light.direction.normalized(), 0);
+  p.intensity = V4(light.intensity, exposure_s);
+  p.intrinsics = {float(camera.K(0, 0)), float(camera.K(1, 1)), float(camera.K(0, 2)),
+                  float(camera.K(1, 2))};
+  p.intrinsics_extra = {float(camera.K(0, 1)), float(camera.pixel_size_m), 1, 0};
+  p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
+                  float(camera.dist[3])};
+  p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
+  p.flags = (pinhole ? sh::kRenderFlagPinhole : 0u) |
+            (pinhole && camera.HasDistortion() ? sh::kRenderFlagDistortion : 0u);
+  p.num_lobes = uint32_t(num_lobes);
+  p.params_per_channel = uint32_t(brdf::ParamsPerChannel(num_lobes));
+  p.atlas_width = uint32_t(atlas_width);
+  p.atlas_height = uint32_t(atlas_height);
+  p.width = uint32_t(w);
+  p.height = uint32_t(h);
+  p.supersampling = 1;
+  return plan;
+}
+
+// ---- Pass targets ---------------------------------------------------------------------------
+
+Status VulkanRenderer::Impl::ReleaseIdle(std::vector<std::unique_ptr<CachedTarget>>* cache) {
+  if (cache->size() < kMaxIdleTargets) return OkStatus();
+  // Destroying a target needs every submission that may use it finished.
+  REFLCAP_RETURN_IF_ERROR(Drain());
+  cache->erase(std::remove_if(cache->begin(), cache->end(),
+                              [&](const std::unique_ptr<CachedTarget>& t) {
+                                return t->batch != batch_counter;
+                              }),
+               cache->end());
+  return OkStatus();
+}
+
+StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireTarget(
+    std::vector<std::unique_ptr<CachedTarget>>* cache, uint32_t w, uint32_t h,
+    const std::vector<VkFormat>& formats, VkImageLayout final_layout) {
+  for (const std::unique_ptr<CachedTarget>& t : *cache) {
+    if (t->width == w && t->height == h) {
+      t->batch = batch_counter;
+      return t.get();
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(ReleaseIdle(cache));
+  auto t = std::make_unique<CachedTarget>();
+  REFLCAP_ASSIGN_OR_RETURN(t->target,
+                           MakePassTarget(*ctx, w, h, 1, formats, final_layout, false));
+  t->width = w;
+  t->height = h;
+  t->layers = 1;
+  t->batch = batch_counter;
+  cache->push_back(std::move(t));
+  return cache->back().get();
+}
+
+StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireShadowMap(const ImagePlan& plan,
+                                                               bool* reused) {
+  const uint32_t res = uint32_t(plan.shadow_resolution), layers = plan.shadow_views;
+  const std::vector<uint8_t> content = plan.ShadowContent();
+  const uint64_t cache_bytes = uint64_t(options.shadow_cache_mib) << 20;
+  *reused = false;
+  CachedTarget* lru = nullptr;
+  size_t same_shape = 0;
+  uint64_t kept_bytes = 0;
+  for (const std::unique_ptr<CachedTarget>& t : shadow_maps) {
+    kept_bytes += t->Bytes();
+    if (t->width != res || t->layers != layers) continue;
+    if (cache_bytes > 0 && t->content == content) {
+      // The same views at the same resolution: the map holds exactly what this image would draw
+      // (the queue has drawn it before anything recorded after it runs).
+      *reused = true;
+      t->last_use = ++use_counter;
+      t->batch = batch_counter;
+      return t.get();
+    }
+    ++same_shape;
+    if (lru == nullptr || t->last_use < lru->last_use) lru = t.get();
+  }
+  const uint64_t map_bytes = uint64_t(res) * res * layers * 4;
+  const uint64_t capacity = std::max<uint64_t>(1, cache_bytes / std::max<uint64_t>(1, map_bytes));
+  CachedTarget* target = nullptr;
+  if (lru != nullptr && (same_shape >= capacity || kept_bytes + map_bytes > cache_bytes)) {
+    // Redraw the least recently used map of this shape. Safe even if an image recorded earlier
+    // samples it: its render pass waits for every earlier shader read of its attachment.
+    target = lru;
+  } else {
+    REFLCAP_RETURN_IF_ERROR(ReleaseIdle(&shadow_maps));
+    auto t = std::make_unique<CachedTarget>();
+    REFLCAP_ASSIGN_OR_RETURN(t->target,
+                             MakePassTarget(*ctx, res, res, layers, {},
+                                            VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
+                                            /*sampled_depth=*/true));
+    t->width = t->height = res;
+    t->layers = layers;
+    shadow_maps.push_back(std::move(t));
+    target = shadow_maps.back().get();
+  }
+  target->content = content;
+  target->last_use = ++use_counter;
+  target->batch = batch_counter;
+  return target;
+}
+
+// ---- Recording ------------------------------------------------------------------------------
+
+Status VulkanRenderer::Impl::RecordImage(Flight& flight, size_t k, const ImagePlan& plan) {
+  Slot& slot = flight.slots[k];
+  const uint64_t out_bytes = plan.OutBytes();
+  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(*ctx, &slot.out_radiance, out_bytes));
+  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(*ctx, &slot.out_aux, out_bytes));
+  if (plan.Supersampled()) {
+    REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(*ctx, &slot.out_mask, out_bytes));
+  }
+  return plan.normal_map ? RecordNormalMapImage(flight, k, plan)
+                         : RecordMeshImage(flight, k, plan);
+}
+
+Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const ImagePlan& plan) {
+  Slot& slot = flight.slots[k];
+  gpu::VkContext& c = *ctx;
+  const uint64_t params_offset = 2 * k * params_stride;
+  const uint64_t out_bytes = plan.OutBytes();
+  const uint32_t w = uint32_t(plan.width), h = uint32_t(plan.height);
+  const uint32_t n = uint32_t(plan.supersampling);
+
+  // Targets.
+  CachedTarget* shadow = nullptr;
+  bool shadow_reused = false;
+  if (plan.shadow_views > 0) {
+    REFLCAP_ASSIGN_OR_RETURN(shadow, AcquireShadowMap(plan, &shadow_reused));
+  }
+  CachedTarget *camera = nullptr, *hires = nullptr, *visibility = nullptr;
+  const std::vector<VkFormat> kCameraFormats = {VK_FORMAT_R32G32B32A32_SFLOAT,
+                                                VK_FORMAT_R32G32B32A32_SFLOAT};
+  if (plan.distorted) {
+    REFLCAP_ASSIGN_OR_RETURN(
+        visibility,
+        AcquireTarget(&visibility_targets, uint32_t(plan.vis_width), uint32_t(plan.vis_height),
+                      {VK_FORMAT_R32_UINT}, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
+  } else {
+    REFLCAP_ASSIGN_OR_RETURN(camera, AcquireTarget(&camera_targets, w, h, kCameraFormats,
+                                                   VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL));
+    if (plan.Supersampled()) {
+      REFLCAP_ASSIGN_OR_RETURN(hires,
+                               AcquireTarget(&hires_targets, w * n, h * n, kCameraFormats,
+                                             VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(EnsurePipelines());
+
+  // Descriptor sets of this slot (no submission using them is pending: the flight is idle).
+  constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  const DeviceImage& shadow_image = shadow != nullptr ? *shadow->target->depth : *dummy_shadow;
+  const Buffer& params = *flight.params;
+  REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.light, light_layout));
+  slot.light->WriteBuffer(kBindParams, params, params_offset, sizeof(sh::RenderParams));
+  slot.light->WriteBuffer(kBindCorners, *corners);
+  auto write_shading = [&](DescriptorSet& set, uint64_t offset) {
+    set.WriteBuffer(kBindParams, params, offset, sizeof(sh::RenderParams));
+    set.WriteBuffer(kBindCorners, *corners);
+    set.WriteBuffer(kBindTriangles, *triangles);
+    set.WriteImage(kBindMaterial, material->array_view(), sampler.handle(), kRead);
+    set.WriteImage(kBindFrame, frame->array_view(), sampler.handle(), kRead);
+    set.WriteImage(kBindShadowMap, shadow_image.array_view(), sampler.handle(), kRead);
+  };
+  if (plan.distorted) {
+    REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.resolve, resolve_layout));
+    write_shading(*slot.resolve, params_offset);
+    slot.resolve->WriteImage(kBindSource, visibility->target->colors[0]->array_view(),
+                             sampler.handle(), kRead);
+    slot.resolve->WriteBuffer(kBindOutRadiance, *slot.out_radiance, 0, out_bytes);
+    slot.resolve->WriteBuffer(kBindOutAux, *slot.out_aux, 0, out_bytes);
+  } else {
+    REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.camera, camera_layout));
+    write_shading(*slot.camera, params_offset);
+    if (plan.Supersampled()) {
+      REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.hires, camera_layout));
+      write_shading(*slot.hires, params_offset + params_stride);
+      REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.downsample, downsample_layout));
+      slot.downsample->WriteImage(kBindSource, hires->target->colors[0]->array_view(),
+                                  sampler.handle(), kRead);
+      slot.downsample->WriteBuffer(kBindOutRadiance, *slot.out_radiance, 0, out_bytes);
+    }
+  }
+
+  // Record. Attachments shared with earlier images are safe to overwrite: each render pass waits
+  // for earlier reads of them (engine/gpu/vk_graphics_pipeline.h, external dependencies).
+  const VkCommandBuffer cb = flight.cmd.handle();
+  if (shadow != nullptr && !shadow_reused) {
+    gpu::RecordLightMapViews(cb, shadow_pipeline, slot.light->handle(), shadow->target->target,
+                             plan.shadow_views, triangle_count);
+    ++batch_stats.shadow_maps_drawn;
+  } else if (shadow != nullptr) {
+    ++batch_stats.shadow_maps_reused;
+  }
+  if (plan.distorted) {
+    visibility->target->target.Begin(cb, 0, {});
+    Draw(cb, visibility_pipeline, *slot.light);
+    visibility->target->target.End(cb);
+    resolve_pipeline.Bind(cb, slot.resolve->handle());
+    vkCmdDispatch(cb, (w + kTile - 1) / kTile, (h + kTile - 1) / kTile, 1);
+  } else {
+    camera->target->target.Begin(cb, 0, {});
+    Draw(cb, depth_pipeline, *slot.camera);
+    Draw(cb, camera_pipeline, *slot.camera);
+    camera->target->target.End(cb);
+    RecordCopyToBuffer(cb, *camera->target->colors[0],
+                       plan.Supersampled() ? *slot.out_mask : *slot.out_radiance, plan.rect_x0,
+                       plan.rect_y0, plan.rect_w, plan.rect_h);
+    if (plan.aux) {
+      RecordCopyToBuffer(cb, *camera->target->colors[1], *slot.out_aux, plan.rect_x0,
+                         plan.rect_y0, plan.rect_w, plan.rect_h);
+    }
+    if (plan.Supersampled()) {
+      hires->target->target.Begin(cb, 0, {});
+      Draw(cb, depth_pipeline, *slot.hires);
+      Draw(cb, camera_pipeline, *slot.hires);
+      hires->target->target.End(cb);
+      const sh::DownsamplePush push{w, h, n, 0};
+      downsample_pipeline.Bind(cb, slot.downsample->handle());
+      downsample_pipeline.Push(cb, &push, sizeof(push));
+      vkCmdDispatch(cb, (w + kTile - 1) / kTile, (h + kTile - 1) / kTile, 1);
+    }
+  }
+  return OkStatus();
+}
+
+Status VulkanRenderer::Impl::RecordNormalMapImage(Flight& flight, size_t k,
+                                                  const ImagePlan& plan) {
+  Slot& slot = flight.slots[k];
+  const uint64_t out_bytes = plan.OutBytes();
+  constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  REFLCAP_RETURN_IF_ERROR(EnsureSet(*ctx, &slot.normal_map, normal_map_layout));
+  DescriptorSet& set = *slot.normal_map;
+  set.WriteBuffer(kBindParams, *flight.params, 2 * k * params_stride, sizeof(sh::RenderParams));
+  set.WriteImage(kBindMaterial, material->array_view(), sampler.handle(), kRead);
+  set.WriteBuffer(kBindOutRadiance, *slot.out_radiance, 0, out_bytes);
+  set.WriteBuffer(kBindOutAux, *slot.out_aux, 0, out_bytes);
+  set.WriteBuffer(kBindNormalMapTexels, *normal_map_texels);
+  const VkCommandBuffer cb = flight.cmd.handle();
+  // Pixels without a texel stay 0 (background).
+  vkCmdFillBuffer(cb, slot.out_radiance->handle(), 0, out_bytes, 0);
+  vkCmdFillBuffer(cb, slot.out_aux->handle(), 0, out_bytes, 0);
+  RecordTransferToCompute(cb);
+  const sh::NormalMapPush push{texel_count};
+  normal_map_pipeline.Bind(cb, set.handle());
+  normal_map_pipeline.Push(cb, &push, sizeof(push));
+  vkCmdDispatch(cb, (texel_count + kTexelGroup - 1) / kTexelGroup, 1, 1);
+  return OkStatus();
+}
+
+// ---- Batches --------------------------------------------------------------------------------
+
+void VulkanRenderer::Impl::ReadBack(const Flight& flight, std::vector<RenderResult>* results) {
+  const std::vector<ImagePlan>& all = *plans;
+  const size_t count = flight.images.size();
+  results->clear();
+  results->resize(count);
+  // Tasks: rows of one image, kReadbackPixelsPerTask pixels or more each.
+  struct Task {
+    size_t k;
+    int y0, y1;
+  };
+  std::vector<Task> tasks;
+  for (size_t k = 0; k < count; ++k) {
+    const ImagePlan& plan = all[flight.images[k]];
+    const int rows = std::max(1, kReadbackPixelsPerTask / std::max(1, plan.rect_w));
+    for (int y = plan.rect_y0; y < plan.rect_y0 + plan.rect_h; y += rows) {
+      tasks.push_back({k, y, std::min(plan.rect_y0 + plan.rect_h, y + rows)});
+    }
+  }
+  if (readback_pool == nullptr && HardwareThreads() > 1 && tasks.size() > 1) {
+    readback_pool = std::make_unique<WorkerPool>(HardwareThreads() - 1);
+  }
+  auto parallel = [&](int64_t n, const std::function<void(int64_t)>& body) {
+    if (readback_pool != nullptr) {
+      readback_pool->ParallelFor(n, body);
+    } else {
+      for (int64_t i = 0; i < n; ++i) body(i);
+    }
+  };
+  // Allocation (and its zero fill) per image, in parallel too.
+  parallel(int64_t(count), [&](int64_t k) {
+    const ImagePlan& plan = all[flight.images[size_t(k)]];
+    RenderResult& r = (*results)[size_t(k)];
+    r.pixels = Image(plan.width, plan.height, 3, 0.0f);
+    r.mask = Image(plan.width, plan.height, 1, 0.0f);
+    if (plan.aux) r.aux = Image(plan.width, plan.height, kAuxChannelCount, 0.0f);
+  });
+  parallel(int64_t(tasks.size()), [&](int64_t t) {
+    const Task& task = tasks[size_t(t)];
+    const ImagePlan& plan = all[flight.images[task.k]];
+    const Slot& slot = flight.slots[task.k];
+    RenderResult& result = (*results)[task.k];
+    const float* rad = static_cast<const float*>(slot.out_radiance->mapped());
+    const float* ax = static_cast<const float*>(slot.out_aux->mapped());
+    const float* mask = plan.Supersampled() ? static_cast<const float*>(slot.out_mask->mapped())
+                                            : rad;
+    // Pixels outside the rectangle stay 0: background, as the passes clear it.
+    for (int y = task.y0; y < task.y1; ++y) {
+      const size_t begin = size_t(y) * plan.width + size_t(plan.rect_x0);
+      const size_t end = begin + size_t(plan.rect_w);
+      for (size_t i = begin; i < end; ++i) {
+        for (int c = 0; c < 3; ++c) result.pixels.data[i * 3 + c] = rad[i * 4 + c];
+        const float m = mask[i * 4 + 3] > 0.5f ? 1.0f : 0.0f;
+        result.mask.data[i] = m;
+        if (plan.aux) {
+          float* a = &result.aux.data[i * kAuxChannelCount];
+          a[kAuxCastShadow] = ax[i * 4 + 0];
+          a[kAuxCosThetaI] = ax[i * 4 + 1];
+          a[kAuxCosThetaO] = ax[i * 4 + 2];
+          a[kAuxCurvature] = ax[i * 4 + 3];
+          a[kAuxMask] = m;
+        }
+      }
+    }
+  });
+}
+
+Status VulkanRenderer::Impl::CompleteOldest() {
+  REFLCAP_CHECK(!in_flight.empty());
+  Flight& flight = *in_flight.front();
+  auto t = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(flight.cmd.Wait(ctx->options().submit_timeout_s));
+  batch_stats.wait_s += SecondsSince(t);
+  stats.gpu_seconds += flight.cmd.last_submit_wall_s();
+  t = std::chrono::steady_clock::now();
+  std::vector<RenderResult> results;
+  ReadBack(flight, &results);
+  batch_stats.readback_s += SecondsSince(t);
+  t = std::chrono::steady_clock::now();
+  const std::vector<size_t> images = std::move(flight.images);
+  flight.images.clear();
+  in_flight.pop_front();
+  for (size_t k = 0; k < images.size(); ++k) {
+    REFLCAP_RETURN_IF_ERROR((*sink)(images[k], std::move(results[k])));
+  }
+  batch_stats.sink_s += SecondsSince(t);
+  return OkStatus();
+}
+
+Status VulkanRenderer::Impl::Drain() {
+  while (!in_flight.empty()) REFLCAP_RETURN_IF_ERROR(CompleteOldest());
+  return OkStatus();
+}
+
+void VulkanRenderer::Impl::Abandon() {
+  for (Flight* f : in_flight) {
+    // No timeout: the flight's buffers must not be reused or freed while the device runs it.
+    (void)f->cmd.Wait(1e30);
+    f->images.clear();
+  }
+  in_flight.clear();
+  for (const std::unique_ptr<Flight>& f : flights) f->images.clear();
+  for (const std::unique_ptr<CachedTarget>& t : shadow_maps) t->content.clear();
+}
+
+Status VulkanRenderer::Impl::RenderPlans(const std::vector<ImagePlan>& all,
+                                         const RenderSink& image_sink) {
+  plans = &all;
+  sink = &image_sink;
+  const bool software = ctx->info().IsSoftware();
+  const size_t max_images =
+      options.batch_images > 0 ? size_t(options.batch_images)
+                               : (software ? size_t{1} : size_t(kMaxBatchImages));
+  const uint64_t budget = uint64_t(options.batch_readback_mib) << 20;
+  while (flights.size() < size_t(options.batches_in_flight)) {
+    auto f = std::make_unique<Flight>();
+    REFLCAP_ASSIGN_OR_RETURN(f->cmd, gpu::CommandBuffer::Create(*ctx));
+    flights.push_back(std::move(f));
+  }
+  const size_t ring = size_t(options.batches_in_flight);
+  Status status = OkStatus();
+  size_t next = 0;
+  while (status.ok() && next < all.size()) {
+    // The batch: consecutive images up to the image cap and the read-back budget (at least one).
+    size_t end = next + 1;
+    uint64_t bytes = all[next].ReadbackBytes();
+    while (end < all.size() && end - next < max_images &&
+           bytes + all[end].ReadbackBytes() <= budget) {
+      bytes += all[end].ReadbackBytes();
+      ++end;
+    }
+    Flight& flight = *flights[next_flight % ring];
+    ++next_flight;
+    // When the ring is full its next flight is the oldest one in flight: read that one back
+    // (the device meanwhile renders the others).
+    while (status.ok() && !flight.images.empty()) status = CompleteOldest();
+    if (!status.ok()) break;
+    const auto record_start = std::chrono::steady_clock::now();
+    flight.batch = ++batch_counter;
+    const size_t count = end - next;
+    if (flight.slots.size() < count) flight.slots.resize(count);
+    if (flight.params_capacity < 2 * count * params_stride) {
+      flight.params.reset();
+      flight.params_capacity = 0;
+      auto buffer = Buffer::Create(*ctx, 2 * count * params_stride, gpu::MemoryKind::kDevice);
+      status = buffer.status();
+      if (status.ok()) {
+        flight.params = std::make_unique<Buffer>(std::move(buffer).value());
+        flight.params_capacity = 2 * count * params_stride;
+      }
+    }
+    if (status.ok()) status = flight.cmd.Begin();
+    if (status.ok()) {
+      // The parameter blocks travel in the command buffer (vkCmdUpdateBuffer), then every
+      // shader stage waits for them.
+      const VkCommandBuffer cb = flight.cmd.handle();
+      for (size_t k = 0; k < count; ++k) {
+        const ImagePlan& plan = all[next + k];
+        vkCmdUpdateBuffer(cb, flight.params->handle(), 2 * k * params_stride,
+                          sizeof(sh::RenderParams), &plan.params);
+        if (plan.Supersampled()) {
+          vkCmdUpdateBuffer(cb, flight.params->handle(), (2 * k + 1) * params_stride,
+                            sizeof(sh::RenderParams), &plan.hires_params);
+        }
+      }
+      VkMemoryBarrier barrier{};
+      barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+      barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+      barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+      vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                           VK_PIPELINE_STAGE_VERTEX_SHADER_BIT |
+                               VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
+                               VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                           0, 1, &barrier, 0, nullptr, 0, nullptr);
+    }
+    for (size_t k = 0; status.ok() && k < count; ++k) {
+      status = RecordImage(flight, k, all[next + k]);
+      flight.images.push_back(next + k);
+    }
+    if (status.ok()) status = flight.cmd.Submit();
+    batch_stats.record_s += SecondsSince(record_start);
+    if (!status.ok()) break;
+    ++batch_stats.submissions;
+    in_flight.push_back(&flight);
+    next = end;
+  }
+  if (status.ok()) status = Drain();
+  if (!status.ok()) Abandon();
+  plans = nullptr;
+  sink = nullptr;
+  return status;
 }
 
 // ---- VulkanRenderer -------------------------------------------------------------------------
@@ -418,7 +1233,8 @@ StatusOr<RenderResult> VulkanRenderer::Impl::Assemble(int w, int h, bool aux_buf
 VulkanRenderer::VulkanRenderer() : impl_(std::make_unique<Impl>()) {}
 VulkanRenderer::~VulkanRenderer() {
   if (impl_ != nullptr && impl_->ctx != nullptr) (void)impl_->ctx->WaitIdle();
-  // Members go in reverse order of declaration; the owned context last (Impl declares it first).
+  // Members go in reverse order of declaration: flights (their fences waited for), targets,
+  // scene, pipelines, layouts; the owned context last (Impl declares it first).
 }
 
 StatusOr<std::unique_ptr<VulkanRenderer>> VulkanRenderer::Create(
@@ -451,6 +1267,7 @@ StatusOr<std::unique_ptr<VulkanRenderer>> VulkanRenderer::Create(
 const gpu::DeviceInfo& VulkanRenderer::device() const { return impl_->ctx->info(); }
 const VulkanRenderOptions& VulkanRenderer::options() const { return impl_->options; }
 const VulkanRenderStats& VulkanRenderer::last_stats() const { return impl_->stats; }
+const VulkanBatchStats& VulkanRenderer::last_batch_stats() const { return impl_->batch_stats; }
 
 Status VulkanRenderer::SetScene(const ShadedScene& scene) {
   REFLCAP_CHECK(scene.scene && scene.atlas && scene.maps);
@@ -466,6 +1283,8 @@ Status VulkanRenderer::SetScene(const ShadedScene& scene) {
                             ")");
   }
   m.scene_kind = Impl::SceneKind::kNone;
+  // Kept shadow maps show the old geometry.
+  for (const std::unique_ptr<CachedTarget>& t : m.shadow_maps) t->content.clear();
   std::vector<sh::RenderCorner> corners(mesh.TriangleCount() * 3);
   std::vector<sh::RenderTriangle> triangles(mesh.TriangleCount());
   const std::vector<float> curvature = SurfaceCurvature(mesh);
@@ -492,6 +1311,7 @@ Status VulkanRenderer::SetScene(const ShadedScene& scene) {
 
   const Eigen::AlignedBox3f box = mesh.Bounds();
   m.sphere_centre = box.center().cast<double>();
+  m.bounds = box.cast<double>();
   m.sphere_radius = 0.5 * box.diagonal().cast<double>().norm() * kSphereInflation;
   m.surface_offset = scene.scene->SurfaceOffset();
   m.scene_kind = Impl::SceneKind::kMesh;
@@ -540,259 +1360,21 @@ StatusOr<RenderResult> VulkanRenderer::RenderImage(const Camera& camera, const L
   if (m.scene_kind != Impl::SceneKind::kMesh) {
     return FailedPreconditionError("VulkanRenderer::RenderImage: no mesh scene (SetScene)");
   }
-  const bool pinhole = camera.model == CameraModel::kPinhole;
-  if (!pinhole && !(camera.pixel_size_m > 0)) {
-    return InvalidArgumentError("camera \"", camera.id,
-                                "\": orthographic rendering needs pixel_size_m");
-  }
-  if (camera.width <= 0 || camera.height <= 0) {
-    return InvalidArgumentError("camera \"", camera.id, "\" has no pixels");
-  }
-  gpu::VkContext& ctx = *m.ctx;
   m.stats = VulkanRenderStats{};
-  const int w = camera.width, h = camera.height, n = options.supersampling;
-  const bool distorted = pinhole && (camera.HasDistortion() || m.options.always_resolve);
-  const bool point_light = light.type == LightType::kPoint;
-
-  // Camera and light in the object frame.
-  const Rigid3 cam_from_object = camera.cam_from_world * world_from_object;
-  const Rigid3 object_from_cam = cam_from_object.Inverse();
-  const Rigid3 object_from_world = world_from_object.Inverse();
-  const Vec3d light_in_object = object_from_world * light.position;
-  const Vec3d light_dir_in_object = (object_from_world.rotation * light.direction).normalized();
-  const Vec3d centre = m.sphere_centre;
-  const double radius = m.sphere_radius;
-  const double centre_z = (cam_from_object * centre).z();
-  // Depth range of the object in front of the camera (pinhole: beyond a sliver in front of the
-  // centre; orthographic: rays start on the plane z = 0, as the CPU's do).
-  double near = 0, far = 0;
-  gpu::CameraDepthRange(pinhole, centre_z, radius, &near, &far);
-
-  sh::RenderParams p{};
-  const double fx = camera.K(0, 0), fy = camera.K(1, 1), s = camera.K(0, 1), cx = camera.K(0, 2),
-               cy = camera.K(1, 2);
-  const Mat4d object_to_cam = Homogeneous(cam_from_object);
-  auto clip_for_scale = [&](int scale) -> Mat4d {
-    if (!pinhole) {
-      return OrthoClipFromCam(camera.pixel_size_m / scale, w * scale, h * scale, near, far) *
-             object_to_cam;
-    }
-    return PinholeClipFromCam(fx * scale, fy * scale, s * scale, scale * (cx + 0.5) - 0.5,
-                              scale * (cy + 0.5) - 0.5, w * scale, h * scale, near, far) *
-           object_to_cam;
-  };
-  SetRows(clip_for_scale(1), p.clip_from_object);
-  p.camera_origin = V4(object_from_cam.translation, 1);
-  p.camera_axis = V4(object_from_cam.rotation.col(2), 0);
-  for (int r = 0; r < 3; ++r)
-    p.object_from_cam[r] = V4(object_from_cam.rotation.row(r).transpose(), 0);
-  p.light = point_light ? V4(light_in_object, 1) : V4(light_dir_in_object, 0);
-  p.intensity = V4(light.intensity, exposure_s);
-  p.intrinsics = {float(fx), float(fy), float(cx), float(cy)};
-  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 1, 0};  // z: 1 sample per side
-  p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
-                  float(camera.dist[3])};
-  p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
-  p.flags = (pinhole ? sh::kRenderFlagPinhole : 0u) |
-            (point_light ? sh::kRenderFlagPointLight : 0u) |
-            (distorted ? sh::kRenderFlagDistortion : 0u);
-  p.num_lobes = uint32_t(m.num_lobes);
-  p.params_per_channel = uint32_t(brdf::ParamsPerChannel(m.num_lobes));
-  p.atlas_width = uint32_t(m.atlas_width);
-  p.atlas_height = uint32_t(m.atlas_height);
-  p.width = uint32_t(w);
-  p.height = uint32_t(h);
-  p.supersampling = uint32_t(n);
-
-  // Shadow views.
-  const VulkanRenderOptions& vo = m.options;
-  const double pixel_m = pinhole ? std::max(centre_z, radius) / fx : camera.pixel_size_m;
-  gpu::LightMapResolution resolution;
-  resolution.texels_per_pixel = vo.shadow_texels_per_pixel;
-  resolution.pixel_m = pixel_m;
-  resolution.min_resolution = vo.min_shadow_resolution;
-  resolution.max_resolution = vo.max_shadow_resolution;
-  resolution.max_cube_resolution = vo.max_cube_resolution;
-  resolution.fixed = vo.shadow_resolution;
-  uint32_t views = 0;
-  int res = 0;
-  if (options.cast_shadows) {
-    gpu::LightMapShape shape = gpu::LightMapShape::kAuto;
-    if (vo.shadow_map == ShadowMapKind::kCube) shape = gpu::LightMapShape::kCube;
-    if (vo.shadow_map == ShadowMapKind::kFitted) shape = gpu::LightMapShape::kFitted;
-    REFLCAP_ASSIGN_OR_RETURN(
-        const gpu::LightMapPlan plan,
-        gpu::PlanLightMap(point_light, light_in_object, light_dir_in_object, centre, radius, shape,
-                          resolution));
-    std::copy(plan.views, plan.views + plan.view_count, p.views);
-    views = plan.view_count;
-    res = plan.resolution;
-    m.stats.shadow_map = plan.kind;
-    p.flags |= sh::kRenderFlagCastShadows;
-    m.stats.shadow_resolution = res;
-  }
-  p.num_shadow_views = views;
-  p.shadow_resolution = uint32_t(res);
-  p.shadow_bias = {float(m.surface_offset), float(vo.shadow_bias_texels),
-                   float(vo.shadow_plane_limit_texels), 0};
-
-  // Visibility image of a distorted camera: the undistorted footprint of the image's border
-  // (pixel edges, ±0.5 px), in normalised coordinates, at visibility_scale texels per pixel.
-  int vis_w = 0, vis_h = 0;
-  double vfx = 0, vfy = 0, vs = 0, vcx = 0, vcy = 0;
-  if (distorted) {
-    double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
-    auto extend = [&](double u, double v) {
-      const double yd = (v - cy) / fy;
-      const double xd = (u - cx - s * yd) / fx;
-      const Vec2d xy = camera.Undistort({xd, yd});
-      xmin = std::min(xmin, xy.x());
-      xmax = std::max(xmax, xy.x());
-      ymin = std::min(ymin, xy.y());
-      ymax = std::max(ymax, xy.y());
-    };
-    for (int x = 0; x <= w; ++x) {
-      extend(x - 0.5, -0.5);
-      extend(x - 0.5, h - 0.5);
-    }
-    for (int y = 0; y <= h; ++y) {
-      extend(-0.5, y - 0.5);
-      extend(w - 0.5, y - 0.5);
-    }
-    const int scale = vo.visibility_scale;
-    vfx = fx * scale;
-    vfy = fy * scale;
-    vs = s * scale;
-    const double u0 = std::min({vfx * xmin + vs * ymin, vfx * xmin + vs * ymax});
-    const double u1 = std::max({vfx * xmax + vs * ymin, vfx * xmax + vs * ymax});
-    vcx = kVisibilityMargin - u0;
-    vcy = kVisibilityMargin - vfy * ymin;
-    const double width_d = std::ceil(u1 - u0) + 2 * kVisibilityMargin + 1;
-    const double height_d = std::ceil(vfy * (ymax - ymin)) + 2 * kVisibilityMargin + 1;
-    if (!(width_d <= kMaxVisibilitySide && height_d <= kMaxVisibilitySide &&
-          width_d <= kMaxVisibilityRatio * scale * w + 64 &&
-          height_d <= kMaxVisibilityRatio * scale * h + 64)) {
-      return InvalidArgumentError("camera \"", camera.id,
-                                  "\": its distortion spreads the image "
-                                  "over an undistorted footprint of ",
-                                  width_d, "x", height_d,
-                                  " px, too wide for the Vulkan renderer's pinhole rasterisation");
-    }
-    vis_w = int(width_d);
-    vis_h = int(height_d);
-    p.vis_intrinsics = {float(vfx), float(vfy), float(vcx), float(vcy)};
-    p.vis_intrinsics_extra = {float(vs), 0, 0, 0};
-    p.vis_width = uint32_t(vis_w);
-    p.vis_height = uint32_t(vis_h);
-    m.stats.distortion_resolve = true;
-    m.stats.visibility_width = vis_w;
-    m.stats.visibility_height = vis_h;
-  }
-
-  // Targets, outputs and descriptor sets (rewritten only here, between submissions).
-  if (views > 0) REFLCAP_RETURN_IF_ERROR(m.shadow_pass.EnsureTarget(ctx, uint32_t(res), views));
-  const uint64_t out_bytes = uint64_t(w) * h * 16;
-  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_radiance, out_bytes));
-  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_aux, out_bytes));
-  if (distorted) {
-    // The visibility pass uses clip_from_object of the visibility image; the resolve reads the
-    // output camera's intrinsics. One params block serves both: the vertex stage reads
-    // clip_from_object, which for a distorted camera is the visibility projection.
-    SetRows(PinholeClipFromCam(vfx, vfy, vs, vcx, vcy, vis_w, vis_h, near, far) * object_to_cam,
-            p.clip_from_object);
-    REFLCAP_RETURN_IF_ERROR(m.EnsureTarget(&m.visibility, uint32_t(vis_w), uint32_t(vis_h),
-                                           {VK_FORMAT_R32_UINT},
-                                           VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
-  } else {
-    REFLCAP_RETURN_IF_ERROR(
-        m.EnsureTarget(&m.camera, uint32_t(w), uint32_t(h),
-                       {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32G32B32A32_SFLOAT},
-                       VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL));
-    if (n > 1) {
-      REFLCAP_RETURN_IF_ERROR(
-          m.EnsureTarget(&m.camera_hires, uint32_t(w * n), uint32_t(h * n),
-                         {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32G32B32A32_SFLOAT},
-                         VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
-      REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_mask, out_bytes));
-    }
-  }
-  REFLCAP_RETURN_IF_ERROR(m.EnsureCameraPipelines());
-  const DeviceImage& shadow_image = views > 0 ? m.shadow_pass.depth() : *m.dummy_shadow;
-  constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-  m.shadow_pass.WriteBuffers(*m.params, *m.corners);
-  for (DescriptorSet* set : {&m.camera_set, &m.resolve_set}) {
-    set->WriteBuffer(kBindParams, *m.params);
-    set->WriteBuffer(kBindCorners, *m.corners);
-    set->WriteBuffer(kBindTriangles, *m.triangles);
-    set->WriteImage(kBindMaterial, m.material->array_view(), m.sampler.handle(), kRead);
-    set->WriteImage(kBindFrame, m.frame->array_view(), m.sampler.handle(), kRead);
-    set->WriteImage(kBindShadowMap, shadow_image.array_view(), m.sampler.handle(), kRead);
-  }
-  if (distorted) {
-    m.resolve_set.WriteImage(kBindSource, m.visibility->colors[0]->array_view(), m.sampler.handle(),
-                             kRead);
-    m.resolve_set.WriteBuffer(kBindOutRadiance, *m.out_radiance, 0, out_bytes);
-    m.resolve_set.WriteBuffer(kBindOutAux, *m.out_aux, 0, out_bytes);
-  }
-  if (!distorted && n > 1) {
-    m.downsample_set.WriteImage(kBindSource, m.camera_hires->colors[0]->array_view(),
-                                m.sampler.handle(), kRead);
-    m.downsample_set.WriteBuffer(kBindOutRadiance, *m.out_radiance, 0, out_bytes);
-  }
-  // Pixel weight: the camera pass shades one sample per pixel (the supersampled pass below sets
-  // its own); the resolve sums N x N samples.
-  p.intensity.w = float(distorted ? exposure_s / (double(n) * n) : exposure_s);
-  REFLCAP_RETURN_IF_ERROR(m.WriteParams(p));
-
-  // Record. The params block is host-visible and read by every pass of this submission, so
-  // everything that differs between passes goes through push constants or is fixed above; the
-  // supersampled pass needs its own projection and weight, so it runs in a second submission.
-  REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
-  VkCommandBuffer cb = m.cmd.handle();
-  if (views > 0) m.shadow_pass.Record(cb, views, m.triangle_count);
-  if (distorted) {
-    m.visibility->target.Begin(cb, 0, {});
-    m.Draw(m.visibility_pipeline, m.shadow_pass.set(), nullptr, 0);
-    m.visibility->target.End(cb);
-    m.resolve_pipeline.Bind(cb, m.resolve_set.handle());
-    vkCmdDispatch(cb, (uint32_t(w) + kTile - 1) / kTile, (uint32_t(h) + kTile - 1) / kTile, 1);
-  } else {
-    m.camera->target.Begin(cb, 0, {});
-    m.Draw(m.depth_pipeline, m.camera_set, nullptr, 0);
-    m.Draw(m.camera_pipeline, m.camera_set, nullptr, 0);
-    m.camera->target.End(cb);
-    REFLCAP_RETURN_IF_ERROR(gpu::RecordCopyImageToBuffer(m.cmd, *m.camera->colors[0], 0,
-                                                         n > 1 ? *m.out_mask : *m.out_radiance, 0));
-    REFLCAP_RETURN_IF_ERROR(
-        gpu::RecordCopyImageToBuffer(m.cmd, *m.camera->colors[1], 0, *m.out_aux, 0));
-  }
-  REFLCAP_RETURN_IF_ERROR(m.cmd.SubmitAndWait());
-  m.stats.gpu_seconds += m.cmd.last_submit_wall_s();
-
-  if (!distorted && n > 1) {
-    // Supersampled pass: N x N the resolution (stratum centres), each fragment weighted
-    // exposure / N², box-filtered into out_radiance. No shadow map redraw: it is still there.
-    SetRows(clip_for_scale(n), p.clip_from_object);
-    p.intrinsics_extra.z = float(n);  // surface.frag: fragment -> stratum centre
-    p.intensity.w = float(exposure_s / (double(n) * n));
-    REFLCAP_RETURN_IF_ERROR(m.WriteParams(p));
-    REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
-    cb = m.cmd.handle();
-    m.camera_hires->target.Begin(cb, 0, {});
-    m.Draw(m.depth_pipeline, m.camera_set, nullptr, 0);
-    m.Draw(m.camera_pipeline, m.camera_set, nullptr, 0);
-    m.camera_hires->target.End(cb);
-    const sh::DownsamplePush push{uint32_t(w), uint32_t(h), uint32_t(n), 0};
-    m.downsample_pipeline.Bind(cb, m.downsample_set.handle());
-    m.downsample_pipeline.Push(cb, &push, sizeof(push));
-    vkCmdDispatch(cb, (uint32_t(w) + kTile - 1) / kTile, (uint32_t(h) + kTile - 1) / kTile, 1);
-    REFLCAP_RETURN_IF_ERROR(m.cmd.SubmitAndWait());
-    m.stats.gpu_seconds += m.cmd.last_submit_wall_s();
-  }
-
-  StatusOr<RenderResult> result = m.Assemble(w, h, options.aux_buffers, *m.out_radiance, *m.out_aux,
-                                             (!distorted && n > 1) ? m.out_mask.get() : nullptr);
-  m.stats.seconds = SecondsSince(start);
+  m.batch_stats = VulkanBatchStats{};
+  REFLCAP_ASSIGN_OR_RETURN(ImagePlan plan,
+                           m.PlanMeshImage(camera, light, world_from_object, exposure_s, options));
+  m.stats = plan.stats;
+  std::vector<ImagePlan> plans;
+  plans.push_back(std::move(plan));
+  RenderResult result;
+  REFLCAP_RETURN_IF_ERROR(m.RenderPlans(plans, [&](size_t, RenderResult&& r) {
+    result = std::move(r);
+    return OkStatus();
+  }));
+  m.stats.shadow_map_reused = m.batch_stats.shadow_maps_reused > 0;
+  m.batch_stats.images = 1;
+  m.stats.seconds = m.batch_stats.seconds = SecondsSince(start);
   return result;
 }
 
@@ -806,66 +1388,70 @@ StatusOr<RenderResult> VulkanRenderer::RenderNormalMapImage(const Camera& camera
     return FailedPreconditionError(
         "VulkanRenderer::RenderNormalMapImage: no normal-map scene (SetNormalMapScene)");
   }
-  if (m.atlas_width != camera.width || m.atlas_height != camera.height) {
-    return InvalidArgumentError("camera \"", camera.id, "\" is ", camera.width, "x", camera.height,
-                                " but the normal map is ", m.atlas_width, "x", m.atlas_height);
-  }
-  if (light.type != LightType::kDirectional) {
-    return InvalidArgumentError("light \"", light.id,
-                                "\": normal-map captures are rendered with directional lights "
-                                "only (the surface positions are unknown)");
-  }
-  gpu::VkContext& ctx = *m.ctx;
   m.stats = VulkanRenderStats{};
-  const int w = camera.width, h = camera.height;
-  const bool pinhole = camera.model == CameraModel::kPinhole;
-  const Rigid3 world_from_cam = camera.cam_from_world.Inverse();
-  sh::RenderParams p{};
-  p.camera_axis = V4(camera.AxisInWorld(), 0);
-  for (int r = 0; r < 3; ++r)
-    p.object_from_cam[r] = V4(world_from_cam.rotation.row(r).transpose(), 0);
-  p.light = V4(light.direction.normalized(), 0);
-  p.intensity = V4(light.intensity, exposure_s);
-  p.intrinsics = {float(camera.K(0, 0)), float(camera.K(1, 1)), float(camera.K(0, 2)),
-                  float(camera.K(1, 2))};
-  p.intrinsics_extra = {float(camera.K(0, 1)), float(camera.pixel_size_m), 1, 0};
-  p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
-                  float(camera.dist[3])};
-  p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
-  p.flags = (pinhole ? sh::kRenderFlagPinhole : 0u) |
-            (pinhole && camera.HasDistortion() ? sh::kRenderFlagDistortion : 0u);
-  p.num_lobes = uint32_t(m.num_lobes);
-  p.params_per_channel = uint32_t(brdf::ParamsPerChannel(m.num_lobes));
-  p.atlas_width = uint32_t(m.atlas_width);
-  p.atlas_height = uint32_t(m.atlas_height);
-  p.width = uint32_t(w);
-  p.height = uint32_t(h);
-  p.supersampling = 1;
-  REFLCAP_RETURN_IF_ERROR(m.WriteParams(p));
-  const uint64_t out_bytes = uint64_t(w) * h * 16;
-  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_radiance, out_bytes));
-  REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.out_aux, out_bytes));
-  constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
-  m.normal_map_set.WriteBuffer(kBindParams, *m.params);
-  m.normal_map_set.WriteImage(kBindMaterial, m.material->array_view(), m.sampler.handle(), kRead);
-  m.normal_map_set.WriteBuffer(kBindOutRadiance, *m.out_radiance, 0, out_bytes);
-  m.normal_map_set.WriteBuffer(kBindOutAux, *m.out_aux, 0, out_bytes);
-  m.normal_map_set.WriteBuffer(kBindNormalMapTexels, *m.normal_map_texels);
-
-  REFLCAP_RETURN_IF_ERROR(m.cmd.Begin());
-  REFLCAP_RETURN_IF_ERROR(m.cmd.FillBuffer(*m.out_radiance, 0, out_bytes, 0));
-  REFLCAP_RETURN_IF_ERROR(m.cmd.FillBuffer(*m.out_aux, 0, out_bytes, 0));
-  VkCommandBuffer cb = m.cmd.handle();
-  const sh::NormalMapPush push{m.texel_count};
-  m.normal_map_pipeline.Bind(cb, m.normal_map_set.handle());
-  m.normal_map_pipeline.Push(cb, &push, sizeof(push));
-  vkCmdDispatch(cb, (m.texel_count + kTexelGroup - 1) / kTexelGroup, 1, 1);
-  REFLCAP_RETURN_IF_ERROR(m.cmd.SubmitAndWait());
-  m.stats.gpu_seconds = m.cmd.last_submit_wall_s();
-  StatusOr<RenderResult> result =
-      m.Assemble(w, h, options.aux_buffers, *m.out_radiance, *m.out_aux, nullptr);
-  m.stats.seconds = SecondsSince(start);
+  m.batch_stats = VulkanBatchStats{};
+  REFLCAP_ASSIGN_OR_RETURN(ImagePlan plan,
+                           m.PlanNormalMapImage(camera, light, exposure_s, options));
+  std::vector<ImagePlan> plans;
+  plans.push_back(std::move(plan));
+  RenderResult result;
+  REFLCAP_RETURN_IF_ERROR(m.RenderPlans(plans, [&](size_t, RenderResult&& r) {
+    result = std::move(r);
+    return OkStatus();
+  }));
+  m.batch_stats.images = 1;
+  m.stats.seconds = m.batch_stats.seconds = SecondsSince(start);
   return result;
+}
+
+Status VulkanRenderer::RenderImages(const std::vector<RenderRequest>& requests,
+                                   const RenderOptions& options, const RenderSink& sink) {
+  const auto start = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  Impl& m = *impl_;
+  if (m.scene_kind == Impl::SceneKind::kNone) {
+    return FailedPreconditionError(
+        "VulkanRenderer::RenderImages: no scene (SetScene or SetNormalMapScene)");
+  }
+  m.stats = VulkanRenderStats{};
+  m.batch_stats = VulkanBatchStats{};
+  // Every image is planned (and checked) before the first one renders.
+  std::vector<ImagePlan> plans;
+  plans.reserve(requests.size());
+  for (size_t i = 0; i < requests.size(); ++i) {
+    const RenderRequest& q = requests[i];
+    const std::string label = q.label.empty() ? StrCat("requests[", i, "]") : q.label;
+    if (q.camera == nullptr || q.light == nullptr) {
+      return InvalidArgumentError(label, ": no camera or no light");
+    }
+    StatusOr<ImagePlan> plan =
+        m.scene_kind == Impl::SceneKind::kMesh
+            ? m.PlanMeshImage(*q.camera, *q.light, q.world_from_object, q.exposure_s, options)
+            : m.PlanNormalMapImage(*q.camera, *q.light, q.exposure_s, options);
+    if (!plan.ok()) return plan.status().WithContext(label);
+    plans.push_back(std::move(plan).value());
+  }
+  const double plan_s = SecondsSince(start);
+  Status status = m.RenderPlans(plans, sink);
+  m.batch_stats.record_s += plan_s;
+  if (!plans.empty()) {
+    const double gpu_seconds = m.stats.gpu_seconds;
+    m.stats = plans.back().stats;
+    m.stats.gpu_seconds = gpu_seconds;
+  }
+  m.batch_stats.images = status.ok() ? plans.size() : 0;
+  m.stats.seconds = m.batch_stats.seconds = SecondsSince(start);
+  return status;
+}
+
+StatusOr<std::vector<RenderResult>> VulkanRenderer::RenderImages(
+    const std::vector<RenderRequest>& requests, const RenderOptions& options) {
+  std::vector<RenderResult> results(requests.size());
+  REFLCAP_RETURN_IF_ERROR(RenderImages(requests, options, [&](size_t i, RenderResult&& r) {
+    results[i] = std::move(r);
+    return OkStatus();
+  }));
+  return results;
 }
 
 }  // namespace reflcap::render

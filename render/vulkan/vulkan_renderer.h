@@ -37,12 +37,28 @@
 // shadow edges the shadow map's texels decide pixels that the CPU's rays decide differently. On
 // the synthetic relief object that is 75-90 dB PSNR with 2 px around those edges excluded.
 //
+// Batches (RenderImages; RenderImage is a batch of one). Many images are recorded into one
+// submission, each with its own parameter blocks, descriptor sets and host-visible output
+// buffers; several submissions are in flight (one fence each), so the device renders the next
+// batches while the host copies a finished one into RenderResults (in parallel) and hands them
+// to the caller. Scene and parameter maps stay resident (SetScene). Pass targets (camera,
+// supersampled, visibility images) are shared by all images of one size: the queue orders their
+// reuse (each render pass waits for earlier reads of its attachments). Shadow maps are kept in a
+// small cache keyed by their exact views and resolution, so an image whose light map equals one
+// already drawn (turntable captures: every camera of one turntable step and light) samples that
+// map instead of drawing it again — the same bits it would draw. Only the pixels inside the
+// projection of the mesh's bounding box (plus a margin) are copied back; the rest is background,
+// 0 as the passes clear it. Results are bit-identical to rendering the images one by one,
+// whatever the batch sizes.
+//
 // Errors: Unavailable when there is no Vulkan device with a graphics queue, when the device lacks
 // a needed format, or when the scene exceeds a device limit (say which); InvalidArgument for bad
 // options or a camera/light the CPU renderer would also refuse. Not thread-safe: one renderer per
-// thread (it owns or borrows one VkContext and records into one command buffer).
+// thread (it owns or borrows one VkContext; its submissions go to that context's queue).
+#include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "engine/camera/camera.h"
 #include "engine/capture/capture.h"
@@ -96,19 +112,67 @@ struct VulkanRenderOptions {
   // Render pinhole cameras without distortion through the distortion path as well (visibility
   // image + exact rays) instead of the per-fragment path: for tests and comparisons.
   bool always_resolve = false;
+  // Batching. Images recorded per submission: 0 = automatic — 1 on a CPU device (lavapipe: a
+  // submission costs nothing there next to the rendering, and small steps overlap the host's
+  // read-back and file writing best), else as many as fit batch_readback_mib, at most
+  // kMaxBatchImages. [0, kMaxBatchImages].
+  int batch_images = 0;
+  // Host-visible read-back memory of one batch (radiance, aux, mask buffers), MiB; bounds every
+  // batch (an image larger than this still renders, alone). [1, 4096].
+  int batch_readback_mib = 128;
+  // Submissions in flight: while the host reads back batch k, the device renders k + 1 .. k + n - 1.
+  // [1, 8].
+  int batches_in_flight = 3;
+  // Device memory for kept shadow maps, MiB: an image whose light map (views and resolution: the
+  // light and the object's pose in it) equals a kept one samples it instead of drawing it again.
+  // 0 = keep none beyond the one being drawn (every image draws its own map). [0, 16384].
+  int shadow_cache_mib = 256;
 
   Status Validate() const;
 };
 
-// What the last RenderImage did (for reports and benchmarks).
+// Largest VulkanRenderOptions::batch_images.
+constexpr int kMaxBatchImages = 256;
+
+// What the last RenderImage did (for reports and benchmarks); after RenderImages, the last image
+// of the call, with the whole call's times.
 struct VulkanRenderStats {
   std::string shadow_map = "none";  // "none", "cube", "fitted", "orthographic"
   int shadow_resolution = 0;        // texels per side (per face for a cube map)
+  bool shadow_map_reused = false;   // RenderImage: sampled a kept map instead of drawing one
   bool distortion_resolve = false;  // distorted camera: visibility image + exact rays
   int visibility_width = 0, visibility_height = 0;
   double seconds = 0;      // host wall clock of the whole call
-  double gpu_seconds = 0;  // submit + fence wait of the command buffer
+  // Submit to fence signalled, summed over the call's submissions (which overlap when several
+  // are in flight: then an upper bound on the device's time).
+  double gpu_seconds = 0;
 };
+
+// What the last RenderImages (or RenderImage) call did.
+struct VulkanBatchStats {
+  size_t images = 0;
+  size_t submissions = 0;
+  size_t shadow_maps_drawn = 0;   // shadow passes recorded
+  size_t shadow_maps_reused = 0;  // images that sampled a kept map instead
+  double seconds = 0;             // host wall clock of the whole call
+  double record_s = 0;            // host: planning, descriptor updates, recording, submitting
+  double wait_s = 0;              // host blocked on fences (the device was behind)
+  double readback_s = 0;          // host: output buffers -> RenderResults (parallel)
+  double sink_s = 0;              // host: in the caller's sink
+  std::string ToString() const;
+};
+
+// One image of RenderImages: the arguments of RenderImage (or RenderNormalMapImage).
+struct RenderRequest {
+  const Camera* camera = nullptr;  // required; must outlive the call
+  const Light* light = nullptr;    // required; must outlive the call
+  Rigid3 world_from_object;        // mesh scenes (normal-map scenes ignore it)
+  double exposure_s = 1;
+  std::string label;  // names the image in errors; "" = "requests[i]"
+};
+
+// Receives image `index` (into the requests) of RenderImages. A non-OK status stops the call.
+using RenderSink = std::function<Status(size_t index, RenderResult&& result)>;
 
 class VulkanRenderer {
  public:
@@ -143,6 +207,20 @@ class VulkanRenderer {
   // camera must be `camera`'s size).
   StatusOr<RenderResult> RenderNormalMapImage(const Camera& camera, const Light& light,
                                               double exposure_s, const RenderOptions& options);
+
+  // Renders every request as RenderImage (mesh scene) or RenderNormalMapImage (normal-map scene)
+  // would, bit for bit, in batches of several images per submission with several submissions in
+  // flight (see the file comment), and calls sink(i, result) for i = 0, 1, ... in order, on the
+  // calling thread. Every request is checked before anything renders: a bad one fails the call,
+  // naming its label, before the sink sees any image. After a device error or a sink error the
+  // call returns it once the device has finished what was submitted; images already handed over
+  // stay handed over, no other one is.
+  Status RenderImages(const std::vector<RenderRequest>& requests, const RenderOptions& options,
+                      const RenderSink& sink);
+  // The same, collecting the results.
+  StatusOr<std::vector<RenderResult>> RenderImages(const std::vector<RenderRequest>& requests,
+                                                   const RenderOptions& options);
+  const VulkanBatchStats& last_batch_stats() const;
 
  private:
   VulkanRenderer();

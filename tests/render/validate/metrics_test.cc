@@ -181,3 +181,138 @@ TEST(Figures, ComposeFigureDrawsThreePanelsAndAColourBar) {
 
 }  // namespace
 }  // namespace reflcap::validate
+
+namespace reflcap::validate {
+namespace {
+
+// SSIM written as the plain loops the metric is defined by (a separable Gaussian, zero outside
+// the image, taps added in order; window statistics renormalised over the mask): SsimSum's
+// vectorised loops and ScoreImage's shared moments must give the same bits.
+double ReferenceSsimSum(const Image& a, const Image& b, const Image& mask) {
+  const int w = a.width, h = a.height;
+  std::vector<double> kernel(2 * kSsimRadius + 1);
+  double ksum = 0;
+  for (int i = -kSsimRadius; i <= kSsimRadius; ++i) {
+    kernel[i + kSsimRadius] = std::exp(-0.5 * i * i / (kSsimSigma * kSsimSigma));
+    ksum += kernel[i + kSsimRadius];
+  }
+  for (double& v : kernel) v /= ksum;
+  int x0 = w, y0 = h, x1 = -1, y1 = -1;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      if (mask.at(x, y) > 0.5f) x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y),
+                                y1 = std::max(y1, y);
+    }
+  }
+  const int bw = x1 - x0 + 1, bh = y1 - y0 + 1;
+  auto blur = [&](const std::vector<double>& in) {
+    std::vector<double> tmp(in.size()), out(in.size());
+    for (int y = 0; y < bh; ++y) {
+      for (int x = 0; x < bw; ++x) {
+        double s = 0;
+        for (int k = -kSsimRadius; k <= kSsimRadius; ++k) {
+          if (x + k >= 0 && x + k < bw) s += kernel[k + kSsimRadius] * in[y * bw + x + k];
+        }
+        tmp[y * bw + x] = s;
+      }
+    }
+    for (int y = 0; y < bh; ++y) {
+      for (int x = 0; x < bw; ++x) {
+        double s = 0;
+        for (int k = -kSsimRadius; k <= kSsimRadius; ++k) {
+          if (y + k >= 0 && y + k < bh) s += kernel[k + kSsimRadius] * tmp[(y + k) * bw + x];
+        }
+        out[y * bw + x] = s;
+      }
+    }
+    return out;
+  };
+  const size_t n = size_t(bw) * bh;
+  std::vector<double> weight(n);
+  for (size_t i = 0; i < n; ++i) weight[i] = mask.at(x0 + int(i % bw), y0 + int(i / bw)) > 0.5f;
+  const std::vector<double> wsum = blur(weight);
+  const double c1 = kSsimK1 * kSsimK1, c2 = kSsimK2 * kSsimK2;
+  std::vector<double> per_pixel(n, 0.0);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double> wa(n), wb(n), waa(n), wbb(n), wab(n);
+    for (size_t i = 0; i < n; ++i) {
+      const double x = a.at(x0 + int(i % bw), y0 + int(i / bw), c);
+      const double y = b.at(x0 + int(i % bw), y0 + int(i / bw), c);
+      wa[i] = weight[i] * x, wb[i] = weight[i] * y, waa[i] = weight[i] * (x * x);
+      wbb[i] = weight[i] * (y * y), wab[i] = weight[i] * (x * y);
+    }
+    const auto ma = blur(wa), mb = blur(wb), maa = blur(waa), mbb = blur(wbb), mab = blur(wab);
+    for (size_t i = 0; i < n; ++i) {
+      if (weight[i] == 0) continue;
+      const double norm = 1 / wsum[i];
+      const double mu_a = ma[i] * norm, mu_b = mb[i] * norm;
+      const double var_a = maa[i] * norm - mu_a * mu_a, var_b = mbb[i] * norm - mu_b * mu_b;
+      const double cov = mab[i] * norm - mu_a * mu_b;
+      per_pixel[i] += ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
+                      ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+    }
+  }
+  double sum = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (weight[i] != 0) sum += per_pixel[i] / 3;
+  }
+  return sum;
+}
+
+TEST(Metrics, SsimMatchesThePlainLoopsBitForBit) {
+  const Image photo = RandomImage(53, 41, 7);
+  Image render = RandomImage(53, 41, 8);
+  for (size_t i = 0; i < render.data.size(); ++i) {
+    render.data[i] = 0.7f * photo.data[i] + 0.3f * render.data[i];
+  }
+  // An irregular mask: a disc with a hole, touching the image's left edge (border taps).
+  Image mask(53, 41, 1, 0.0f);
+  for (int y = 0; y < 41; ++y) {
+    for (int x = 0; x < 53; ++x) {
+      const double r2 = (x - 18.0) * (x - 18.0) + (y - 20.0) * (y - 20.0);
+      mask.at(x, y) = r2 < 19.0 * 19.0 && r2 > 16.0 ? 1.0f : 0.0f;
+    }
+  }
+  Image photo_tm(53, 41, 3), render_tm(53, 41, 3);
+  for (size_t i = 0; i < photo.data.size(); ++i) {
+    photo_tm.data[i] = ToneMap(photo.data[i], 1.3);
+    render_tm.data[i] = ToneMap(render.data[i], 1.3);
+  }
+  const double reference = ReferenceSsimSum(photo_tm, render_tm, mask);
+  EXPECT_EQ(SsimSum(photo_tm, render_tm, mask), reference);
+  EXPECT_GT(reference, 0.0);
+}
+
+TEST(Metrics, ScoreImageSsimIsSsimSumOfTheToneMappedImages) {
+  // ScoreImage tone-maps only where SSIM looks (unless figure data is kept) and shares the
+  // photograph's moments between the raw and the scaled SSIM: same bits as the separate calls.
+  const Image photo = RandomImage(45, 38, 11);
+  Image render = RandomImage(45, 38, 12);
+  for (size_t i = 0; i < render.data.size(); ++i) {
+    render.data[i] = 0.5f * (photo.data[i] + render.data[i]);
+  }
+  Image mask(45, 38, 1, 0.0f);
+  for (int y = 6; y < 31; ++y) {
+    for (int x = 9; x < 34; ++x) mask.at(x, y) = 1;
+  }
+  for (bool keep : {false, true}) {
+    ScoreOptions options;
+    options.keep_figure_data = keep;
+    const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, options);
+    const double inv_mean = 1 / s.tone_mean;
+    Image photo_tm(45, 38, 3), render_tm(45, 38, 3), scaled_tm(45, 38, 3);
+    for (size_t i = 0; i < photo.PixelCount(); ++i) {
+      for (int c = 0; c < 3; ++c) {
+        photo_tm.data[i * 3 + c] = ToneMap(photo.data[i * 3 + c], inv_mean);
+        render_tm.data[i * 3 + c] = ToneMap(render.data[i * 3 + c], inv_mean);
+        scaled_tm.data[i * 3 + c] = ToneMap(float(s.scale[c] * render.data[i * 3 + c]), inv_mean);
+      }
+    }
+    EXPECT_EQ(s.raw.ssim_sum, SsimSum(photo_tm, render_tm, mask)) << keep;
+    EXPECT_EQ(s.scaled.ssim_sum, SsimSum(photo_tm, scaled_tm, mask)) << keep;
+    if (keep) EXPECT_EQ(s.photo_tm.data, photo_tm.data);
+  }
+}
+
+}  // namespace
+}  // namespace reflcap::validate

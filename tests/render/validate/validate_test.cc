@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -208,6 +209,82 @@ TEST(Validate, ReportGathersTheFitStatusMapAndTheCoverageMap) {
   EXPECT_NE(html.find("<img src=\"coverage.png\""), std::string::npos);
   EXPECT_NE(html.find("timings.total_s"), std::string::npos);
   EXPECT_NE(html.find("render (cpu, cpu): total_s"), std::string::npos);
+}
+
+TEST(Validate, NumbersDoNotDependOnTheThreadCount) {
+  // Images are scored in parallel and their sums pooled in image order: metrics.json (less its
+  // timings) and the figures must be the same bytes with 1, 2 or 5 threads.
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.02, 56, 3).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  std::string first_metrics;
+  std::vector<std::string> first_figures;
+  for (int threads : {1, 2, 5}) {
+    SCOPED_TRACE(threads);
+    ValidateOptions options;
+    options.max_figures = 3;
+    options.threads = threads;
+    const fs::path out = dir / ("report_" + std::to_string(threads));
+    auto summary = RunValidation(*capture, dir / "renders", out, options);
+    ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+    Json metrics = Json::parse(ReadTextFile(out / "metrics.json").value());
+    metrics.erase("timings");
+    std::vector<std::string> figures;
+    for (const auto& entry : fs::directory_iterator(out / "figures")) {
+      figures.push_back(entry.path().filename().string() + ":" +
+                        ReadTextFile(entry.path()).value());
+    }
+    std::sort(figures.begin(), figures.end());
+    if (first_metrics.empty()) {
+      first_metrics = metrics.dump();
+      first_figures = figures;
+      EXPECT_GE(figures.size(), 3u);
+      continue;
+    }
+    EXPECT_EQ(metrics.dump(), first_metrics);
+    EXPECT_EQ(figures, first_figures);
+  }
+  ValidateOptions bad;
+  bad.threads = -1;
+  EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(RenderCapture, WriterCountChangesNoFileAndBadOptionsAreRefused) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.0, 40, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  std::vector<std::string> first;
+  for (int writers : {1, 4}) {
+    render::CaptureRenderOptions options;
+    options.split = render::SplitSelection::kAll;
+    options.writers = writers;
+    const fs::path out = dir / ("renders_" + std::to_string(writers));
+    auto summary = render::RenderCapture(*capture, dir / "capture/gt/params.exr", out, options);
+    ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+    EXPECT_EQ(summary->writers, writers);
+    std::vector<std::string> files;
+    for (const auto& entry : fs::recursive_directory_iterator(out)) {
+      if (!entry.is_regular_file() || entry.path().filename() == "render_report.json") continue;
+      files.push_back(fs::relative(entry.path(), out).string() + ":" +
+                      ReadTextFile(entry.path()).value());
+    }
+    std::sort(files.begin(), files.end());
+    EXPECT_EQ(files.size(), 3 * capture->images.size());
+    if (first.empty()) {
+      first = files;
+    } else {
+      EXPECT_TRUE(files == first) << "files differ between 1 and 4 writers";
+    }
+  }
+  render::CaptureRenderOptions bad;
+  bad.writers = -1;
+  EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
+  bad.writers = 0;
+  bad.supersampling = 0;
+  EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
 }
 
 TEST(RenderCapture, FileLayoutKeys) {
