@@ -53,8 +53,19 @@ bool IsSelected(SplitSelection selection, Split split) {
   }
 }
 
-std::string ImageKey(const std::string& file) {
+// The image file as a path inside a render folder: relative, without "..". A file given with an
+// absolute path, or one outside the capture's folder, keeps only its name (under images/): a
+// render folder's outputs must never land outside it — on the photographs themselves, say.
+fs::path InsideName(const std::string& file) {
   fs::path p = fs::path(file).lexically_normal();
+  bool escapes = p.has_root_path() || p.empty();
+  for (const fs::path& part : p) escapes = escapes || part == "..";
+  if (escapes) p = fs::path("images") / fs::path(file).filename();
+  return p;
+}
+
+std::string ImageKey(const std::string& file) {
+  fs::path p = InsideName(file);
   p.replace_extension();
   auto it = p.begin();
   if (it != p.end() && *it == "images" && std::next(it) != p.end()) {
@@ -66,7 +77,7 @@ std::string ImageKey(const std::string& file) {
 }
 
 std::string RenderPathFor(const std::string& file) {
-  return fs::path(file).lexically_normal().replace_extension(".exr").generic_string();
+  return InsideName(file).replace_extension(".exr").generic_string();
 }
 std::string MaskPathFor(const std::string& file) { return "masks/" + ImageKey(file) + ".png"; }
 std::string AuxPathFor(const std::string& file) { return "aux/" + ImageKey(file) + ".exr"; }

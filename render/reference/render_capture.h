@@ -41,7 +41,9 @@ bool IsSelected(SplitSelection selection, Split split);
 // The name an image's derived files take: its relative file without extension, and without a
 // leading "images/" folder ("images/0003.exr" -> "0003", "raw/a.png" -> "raw/a").
 std::string ImageKey(const std::string& file);
-// Relative paths of the derived files of image file F inside a render folder.
+// Relative paths of the derived files of image file F inside a render folder. An F that is
+// absolute or leaves the capture's folder ("..") contributes only its file name (images/<name>),
+// so no output ever lands outside the render folder.
 std::string RenderPathFor(const std::string& file);  // F with extension .exr
 std::string MaskPathFor(const std::string& file);    // masks/<key>.png
 std::string AuxPathFor(const std::string& file);     // aux/<key>.exr

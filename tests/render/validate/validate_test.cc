@@ -294,6 +294,34 @@ TEST(RenderCapture, FileLayoutKeys) {
   EXPECT_EQ(render::RenderPathFor("images/001.png"), "images/001.exr");
   EXPECT_EQ(render::MaskPathFor("images/0003.exr"), "masks/0003.png");
   EXPECT_EQ(render::AuxPathFor("images/0003.exr"), "aux/0003.exr");
+  // A file outside the capture's folder never makes an output outside the render folder (run as
+  // root, a re-render once overwrote the photograph it was named after).
+  EXPECT_EQ(render::RenderPathFor("/data/rig/images/0003.exr"), "images/0003.exr");
+  EXPECT_EQ(render::RenderPathFor("../other/0003.png"), "images/0003.exr");
+  EXPECT_EQ(render::RenderPathFor("images/../../0003.exr"), "images/0003.exr");
+  EXPECT_EQ(render::ImageKey("/data/rig/images/0003.exr"), "0003");
+  EXPECT_EQ(render::MaskPathFor("../0003.exr"), "masks/0003.png");
+}
+
+TEST(RenderCapture, ImagesGivenByAbsolutePathsAreNeverOverwritten) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.0, 40, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  // The capture as a user might write it: every image by its absolute path.
+  for (CaptureImage& image : capture->images) {
+    image.file = fs::absolute(capture->Resolve(image.file)).string();
+  }
+  std::vector<std::string> before;
+  for (const CaptureImage& image : capture->images) before.push_back(ReadTextFile(image.file).value());
+  render::CaptureRenderOptions options;
+  options.split = render::SplitSelection::kAll;
+  auto summary = render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  for (size_t i = 0; i < capture->images.size(); ++i) {
+    EXPECT_EQ(ReadTextFile(capture->images[i].file).value(), before[i]) << capture->images[i].file;
+    EXPECT_TRUE(fs::exists(dir / "renders" / render::RenderPathFor(capture->images[i].file)));
+  }
 }
 
 }  // namespace
