@@ -63,9 +63,9 @@ struct VulkanFitterOptions {
   // FitOptions::threads overrides it per call when > 0).
   int threads = 0;
   // Batch limits (0 = automatic: 32,768 problems and 2^21 residual records for kLanes; for
-  // kClusters a quarter of the chunk's problems, at least 32,768 and at most 2^20, and 2^25
-  // records, within an eighth of the device's memory; both also kept within
-  // maxStorageBufferRange). Small values make tests exercise many batches.
+  // kClusters 2^20 problems and 2^25 records, within an eighth of the device's memory — a
+  // sample-store chunk is usually one batch; both also kept within maxStorageBufferRange).
+  // Small values make tests exercise many batches.
   uint32_t max_batch_problems = 0;
   uint64_t max_batch_residuals = 0;
   // Persistent invocations per dispatch (0 = automatic: kLanes 1,024 on a CPU device, 65,536 on a
