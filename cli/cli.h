@@ -62,6 +62,9 @@ int RunValidate(int argc, char** argv);  // verb_validate.cc
 int RunImportDiligent(int argc, char** argv);  // verb_import_diligent.cc
 int RunRun(int argc, char** argv);       // verb_run.cc
 int RunBench(int argc, char** argv);     // verb_bench.cc
+int RunCalibrate(int argc, char** argv); // verb_calibrate.cc
+int RunHdr(int argc, char** argv);       // verb_hdr.cc
+int RunScan(int argc, char** argv);      // verb_scan.cc
 
 
 }  // namespace reflcap::cli

@@ -12,6 +12,9 @@ constexpr char kUsage[] =
     "usage: reflcap <verb> [options]     (reflcap <verb> --help for each)\n"
     "\n"
     "verbs:\n"
+    "  calibrate intrinsics|turntable CALIB.json --out FILE   camera and turntable calibration\n"
+    "  hdr BRACKETS.json --out CAPTURE  exposure brackets -> linear HDR capture, white-balanced\n"
+    "  scan SCAN.json --out MESH_DIR    structured light -> watertight mesh with a UV atlas\n"
     "  info CAPTURE        validate a capture/1 dataset completely and summarise it\n"
     "  synth --out DIR     write a synthetic capture with ground truth\n"
     "  demo [--out DIR]    run the pipeline end to end on a small synthetic capture\n"
@@ -60,6 +63,9 @@ int main(int argc, char** argv) {
   if (verb == "validate") return cli::RunValidate(argc, argv);
   if (verb == "import-diligent") return cli::RunImportDiligent(argc, argv);
   if (verb == "bench") return cli::RunBench(argc, argv);
+  if (verb == "calibrate") return cli::RunCalibrate(argc, argv);
+  if (verb == "hdr") return cli::RunHdr(argc, argv);
+  if (verb == "scan") return cli::RunScan(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }
