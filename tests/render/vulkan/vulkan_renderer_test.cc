@@ -23,11 +23,18 @@ using testing::Agreement;
 using testing::Compare;
 using testing::kMinPsnrDb;
 
-// Both renderers shade in float from the same float inputs; the rasteriser interpolates
-// position, normal and UV where Embree intersects, so a pixel's surface point agrees to float
-// rounding (~1e-6 relative of the distance): 1e-4 is the bar, with margin for the
-// tessellated sphere's facets (both renderers see the same facets).
+// Both renderers shade in float from the same float inputs at the same surface point: the GPU
+// intersects each sample's exact ray with the triangle the rasteriser found
+// (shaders/render/surface_hit.glsl), as Embree does, so the point agrees to float rounding (~1e-6
+// relative of the distance) whatever the device's sub-pixel precision (interpolated attributes
+// carried its snapping: up to 3.6e-4 relative on an NVIDIA H100, subPixelPrecisionBits 8). 1e-4
+// is the bar. Measured worst interior error: plane 6.1e-7 on the H100 / 5.7e-7 on
+// lavapipe, sphere 1.7e-6 / 2.1e-6; the renderers' exp/log are precise_math twins, not the
+// device's, so transcendental accuracy does not enter.
 constexpr double kRelTolerance = 1e-4;
+// |Δ cos θ| of the aux buffers: the same exact points and normals; measured at most 8.5e-7 (H100)
+// and 7.7e-7 (lavapipe) on these scenes (2.7e-5 on the H100 with interpolated attributes).
+constexpr double kAuxCosTolerance = 1e-5;
 // Values below this fraction of the image's peak are compared in absolute terms.
 constexpr double kAbsFloorFraction = 1e-3;
 // Sphere pixels compared only where both cosines exceed this (as the CPU closed-form test).
@@ -266,7 +273,7 @@ TEST_F(VulkanRendererScenes, KnownOccluderUnderEveryShadowMapMatchesCpu) {
     EXPECT_GE(a.psnr_db, kMinPsnrDb);
     EXPECT_EQ(a.shadow_mismatches, 0u);
     EXPECT_EQ(a.mask_mismatches, 0u);
-    EXPECT_LT(a.max_aux_cos_error, 1e-5);
+    EXPECT_LT(a.max_aux_cos_error, kAuxCosTolerance);
   }
 }
 
@@ -386,7 +393,7 @@ TEST_F(VulkanRendererScenes, NormalMapCaptureMatchesCpu) {
     const RelativeCheck rc = CompareInterior(*cpu, *gpu);
     EXPECT_EQ(rc.failed, 0u) << "worst " << rc.worst;
     for (size_t i = 0; i < cpu->aux.data.size(); ++i) {
-      ASSERT_NEAR(gpu->aux.data[i], cpu->aux.data[i], 1e-5) << "aux value " << i;
+      ASSERT_NEAR(gpu->aux.data[i], cpu->aux.data[i], kAuxCosTolerance) << "aux value " << i;
     }
     EXPECT_EQ(gpu->mask.data, cpu->mask.data);
   }
