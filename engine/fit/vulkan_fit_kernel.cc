@@ -262,30 +262,13 @@ void LmKernels::Write(const LmBindings& b) {
   vkUpdateDescriptorSets(device_, uint32_t(std::size(writes)), writes, 0, nullptr);
 }
 
-void LmKernels::RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
-                               const gpu::shared::FitGpuPush& push, uint32_t groups) const {
+void LmKernels::RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline, const void* push,
+                               uint32_t groups, bool barrier) const {
   const VkCommandBuffer c = cmd.handle();
   vkCmdBindPipeline(c, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
   vkCmdBindDescriptorSets(c, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set_, 0, nullptr);
-  vkCmdPushConstants(c, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
-  vkCmdDispatch(c, groups, 1, 1);
-  VkMemoryBarrier barrier{};
-  barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
-  barrier.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
-  barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
-                          VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
-  vkCmdPipelineBarrier(c, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1,
-                       &barrier, 0, nullptr, 0, nullptr);
-}
-
-void LmKernels::RecordClusterDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
-                                      const gpu::shared::FitGpuClusterPush& push, uint32_t groups,
-                                      bool barrier) const {
-  const VkCommandBuffer c = cmd.handle();
-  vkCmdBindPipeline(c, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
-  vkCmdBindDescriptorSets(c, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set_, 0, nullptr);
-  vkCmdPushConstants(c, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+  vkCmdPushConstants(c, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0,
+                     uint32_t(sizeof(gpu::shared::FitGpuPush)), push);
   vkCmdDispatch(c, groups, 1, 1);
   if (!barrier) return;
   VkMemoryBarrier b{};

@@ -83,16 +83,13 @@ class LmKernels {
                                 bool native_math = false);
   // Points the descriptor set at `b`. No submission that uses the set may be running.
   void Write(const LmBindings& b);
-  // Records binding `pipeline` and the set, the push constants, the dispatch of `groups`
-  // workgroups and a barrier that makes its writes visible to later commands, into `cmd`
-  // (recording).
-  void RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
-                      const gpu::shared::FitGpuPush& push, uint32_t groups) const;
-  // The same for lm_fit_cluster.comp, without the barrier when `barrier` is false (dispatches
-  // over disjoint queue ranges and control slots may run concurrently).
-  void RecordClusterDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline,
-                             const gpu::shared::FitGpuClusterPush& push, uint32_t groups,
-                             bool barrier) const;
+  // Records binding `pipeline` and the set, the 16 bytes of push constants (FitGpuPush for
+  // lm_fit.comp, FitGpuClusterPush for lm_fit_cluster.comp), the dispatch of `groups` workgroups
+  // and, when `barrier`, a barrier that makes its writes visible to later commands, into `cmd`
+  // (recording). Dispatches over disjoint queue ranges and control slots (the cluster kernel's)
+  // may go without one and run concurrently.
+  void RecordDispatch(gpu::CommandBuffer& cmd, VkPipeline pipeline, const void* push,
+                      uint32_t groups, bool barrier = true) const;
 
  private:
   LmKernels() = default;

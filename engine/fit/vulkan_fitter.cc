@@ -267,8 +267,12 @@ class VulkanFitterImpl final : public VulkanFitter {
   Status RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b);
   Status RunLanes(const Plan& plan, VkPipeline pipeline, Batch* b);
   Status RunClusters(const Plan& plan, VkPipeline pipeline, Batch* b);
-  // Uploads the batch's settings, descriptors, queue (and quads when not written in place).
-  Status UploadBatch(const Plan& plan, Batch* b, uint64_t desc_bytes, uint64_t queue_bytes);
+  // The batch on the device: its buffers sized (each binding within maxStorageBufferRange), the
+  // settings, descriptors, queue (and quads when not written in place) uploaded, and the kernels'
+  // descriptor set pointed at them; `lane_bytes` and `control_bytes` are the kernel's lane-state
+  // and control sizes. *result_bytes gets the results' size.
+  Status BindBatch(const Plan& plan, Batch* b, uint64_t lane_bytes, uint64_t control_bytes,
+                   uint64_t* result_bytes);
   void Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results);
   Status Ensure(gpu::Buffer* buffer, uint64_t bytes);
 
@@ -439,12 +443,34 @@ Status VulkanFitterImpl::Ensure(gpu::Buffer* buffer, uint64_t bytes) {
 }
 
 Status VulkanFitterImpl::RunOnDevice(const Plan& plan, VkPipeline pipeline, Batch* b) {
+  b->dispatches = b->ticks = b->lanes = 0;
+  b->evaluations = 0;
+  if (b->queue.empty()) return OkStatus();
   return plan.kernel == VulkanFitKernel::kClusters ? RunClusters(plan, pipeline, b)
                                                    : RunLanes(plan, pipeline, b);
 }
 
-Status VulkanFitterImpl::UploadBatch(const Plan& plan, Batch* b, uint64_t desc_bytes,
-                                     uint64_t queue_bytes) {
+Status VulkanFitterImpl::BindBatch(const Plan& plan, Batch* b, uint64_t lane_bytes,
+                                   uint64_t control_bytes, uint64_t* result_bytes) {
+  const int P = plan.num_params;
+  const uint64_t problems = b->problems.size();
+  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
+  const uint64_t queue_bytes = b->queue.size() * 4;
+  *result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
+  const uint64_t range = ctx_->info().max_storage_buffer_range;
+  for (uint64_t bytes : {desc_bytes, queue_bytes, *result_bytes, lane_bytes, control_bytes}) {
+    if (bytes > range) {
+      return InternalError("Vulkan fitter: a batch binding of ", bytes,
+                           " bytes exceeds maxStorageBufferRange (", range, ")");
+    }
+  }
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, *result_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
+  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, control_bytes));
+
   sh::FitGpuSettings settings{};
   {
     double lo[kMaxParams] = {}, hi[kMaxParams] = {};
@@ -466,36 +492,27 @@ Status VulkanFitterImpl::UploadBatch(const Plan& plan, Batch* b, uint64_t desc_b
     const uint64_t texels = std::max<uint64_t>(1, b->quad.back()) * REFLCAP_FIT_QUAD_TEXELS;
     REFLCAP_RETURN_IF_ERROR(b->device_records->Upload(*ctx_, cmd_, b->rgba.data(), texels * 16));
   }
+
+  internal::LmBindings bindings;
+  bindings.settings = gpu::Bind(buffers_.settings, 0, sizeof(sh::FitGpuSettings));
+  bindings.desc = gpu::Bind(buffers_.desc, 0, desc_bytes);
+  bindings.queue = gpu::Bind(buffers_.queue, 0, queue_bytes);
+  bindings.lanes = gpu::Bind(buffers_.lanes, 0, lane_bytes);
+  bindings.results = gpu::Bind(buffers_.results, 0, *result_bytes);
+  bindings.control = gpu::Bind(buffers_.control, 0, control_bytes);
+  bindings.records = b->device_records->view();
+  kernels_->Write(bindings);
   return OkStatus();
 }
 
 Status VulkanFitterImpl::RunLanes(const Plan& plan, VkPipeline pipeline, Batch* b) {
   const auto start = std::chrono::steady_clock::now();
-  b->dispatches = b->ticks = b->lanes = 0;
-  b->evaluations = 0;
-  if (b->queue.empty()) return OkStatus();
   const int P = plan.num_params;
   const uint64_t problems = b->problems.size();
-  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
-  const uint64_t queue_bytes = b->queue.size() * 4;
-  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
   const uint32_t lanes = std::min<uint32_t>(uint32_t(b->queue.size()), plan.lane_cap);
   const uint64_t lane_bytes = uint64_t(lanes) * REFLCAP_FIT_LANE_STRIDE(P) * 4;
-  const uint64_t range = ctx_->info().max_storage_buffer_range;
-  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, lane_bytes}) {
-    if (bytes > range) {
-      return InternalError("Vulkan fitter: a batch binding of ", bytes,
-                           " bytes exceeds maxStorageBufferRange (", range, ")");
-    }
-  }
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, lane_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, sizeof(sh::FitGpuControl)));
-
-  REFLCAP_RETURN_IF_ERROR(UploadBatch(plan, b, desc_bytes, queue_bytes));
+  uint64_t result_bytes = 0;
+  REFLCAP_RETURN_IF_ERROR(BindBatch(plan, b, lane_bytes, sizeof(sh::FitGpuControl), &result_bytes));
 
   // Ticks per dispatch: the loop budget (T (Q + 2) + 1 steps for Q quads, see lm_fit.comp) and
   // the submit work cap.
@@ -513,16 +530,6 @@ Status VulkanFitterImpl::RunLanes(const Plan& plan, VkPipeline pipeline, Batch* 
   const uint64_t max_dispatches = (b->queue.size() * problem_ticks) / (uint64_t(lanes) * ticks) +
                                   problem_ticks / ticks + 3;
 
-  internal::LmBindings bindings;
-  bindings.settings = gpu::Bind(buffers_.settings, 0, sizeof(sh::FitGpuSettings));
-  bindings.desc = gpu::Bind(buffers_.desc, 0, desc_bytes);
-  bindings.queue = gpu::Bind(buffers_.queue, 0, queue_bytes);
-  bindings.lanes = gpu::Bind(buffers_.lanes, 0, lane_bytes);
-  bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
-  bindings.control = gpu::Bind(buffers_.control, 0, sizeof(sh::FitGpuControl));
-  bindings.records = b->device_records->view();
-  kernels_->Write(bindings);
-
   const sh::FitGpuPush push{uint32_t(b->queue.size()), lanes, uint32_t(ticks), 0};
   const uint32_t groups = uint32_t(gpu::GroupCount(lanes, kLocalSize));
   REFLCAP_RETURN_IF_ERROR(cmd_.Begin());
@@ -533,7 +540,7 @@ Status VulkanFitterImpl::RunLanes(const Plan& plan, VkPipeline pipeline, Batch* 
     if (d > 0) REFLCAP_RETURN_IF_ERROR(cmd_.Begin());
     REFLCAP_RETURN_IF_ERROR(  // busy and evaluations
         cmd_.FillBuffer(buffers_.control, offsetof(sh::FitGpuControl, busy), 8, 0));
-    kernels_->RecordDispatch(cmd_, pipeline, push, groups);
+    kernels_->RecordDispatch(cmd_, pipeline, &push, groups);
     REFLCAP_RETURN_IF_ERROR(cmd_.SubmitAndWait());
     sh::FitGpuControl control{};
     REFLCAP_RETURN_IF_ERROR(gpu::Download(*ctx_, buffers_.control, 0, sizeof control, &control));
@@ -555,14 +562,8 @@ Status VulkanFitterImpl::RunLanes(const Plan& plan, VkPipeline pipeline, Batch* 
 
 Status VulkanFitterImpl::RunClusters(const Plan& plan, VkPipeline pipeline, Batch* b) {
   const auto start = std::chrono::steady_clock::now();
-  b->dispatches = b->ticks = b->lanes = 0;
-  b->evaluations = 0;
-  if (b->queue.empty()) return OkStatus();
   const int P = plan.num_params;
   const uint64_t problems = b->problems.size();
-  const uint64_t desc_bytes = problems * REFLCAP_FIT_DESC_STRIDE(P) * 4;
-  const uint64_t queue_bytes = b->queue.size() * 4;
-  const uint64_t result_bytes = problems * REFLCAP_FIT_OUT_STRIDE(P) * 4;
   const uint32_t cluster = plan.cluster_size;
   const uint64_t resident = std::max<uint64_t>(1, plan.lane_cap / cluster);
   // Problems per dispatch: a few per resident cluster; on a device with a loop budget
@@ -581,30 +582,9 @@ Status VulkanFitterImpl::RunClusters(const Plan& plan, VkPipeline pipeline, Batc
   const uint64_t count = b->queue.size();
   const uint64_t dispatches = (count + per_dispatch - 1) / per_dispatch;
   const uint64_t control_bytes = dispatches * sizeof(sh::FitGpuControl);
-  const uint64_t range = ctx_->info().max_storage_buffer_range;
-  for (uint64_t bytes : {desc_bytes, queue_bytes, result_bytes, control_bytes}) {
-    if (bytes > range) {
-      return InternalError("Vulkan fitter: a batch binding of ", bytes,
-                           " bytes exceeds maxStorageBufferRange (", range, ")");
-    }
-  }
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.settings, sizeof(sh::FitGpuSettings)));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.desc, desc_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.queue, queue_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.results, result_bytes));
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.lanes, 16));  // binding 4: unused by this kernel
-  REFLCAP_RETURN_IF_ERROR(Ensure(&buffers_.control, control_bytes));
-  REFLCAP_RETURN_IF_ERROR(UploadBatch(plan, b, desc_bytes, queue_bytes));
-
-  internal::LmBindings bindings;
-  bindings.settings = gpu::Bind(buffers_.settings, 0, sizeof(sh::FitGpuSettings));
-  bindings.desc = gpu::Bind(buffers_.desc, 0, desc_bytes);
-  bindings.queue = gpu::Bind(buffers_.queue, 0, queue_bytes);
-  bindings.lanes = gpu::Bind(buffers_.lanes, 0, 16);
-  bindings.results = gpu::Bind(buffers_.results, 0, result_bytes);
-  bindings.control = gpu::Bind(buffers_.control, 0, control_bytes);
-  bindings.records = b->device_records->view();
-  kernels_->Write(bindings);
+  uint64_t result_bytes = 0;
+  // Binding 4 (lane state) is unused by this kernel: a minimal buffer stands in.
+  REFLCAP_RETURN_IF_ERROR(BindBatch(plan, b, 16, control_bytes, &result_bytes));
 
   // One submission: reset the counters, mark every result unsolved, then all dispatches (no
   // barrier between them: disjoint queue ranges, control slots and results).
@@ -618,9 +598,9 @@ Status VulkanFitterImpl::RunClusters(const Plan& plan, VkPipeline pipeline, Batc
     const uint64_t invocations = std::min(n, resident) * cluster;
     max_invocations = std::max<uint32_t>(max_invocations, uint32_t(invocations));
     const sh::FitGpuClusterPush push{uint32_t(begin), uint32_t(n), uint32_t(d), 0};
-    kernels_->RecordClusterDispatch(cmd_, pipeline, push,
-                                    uint32_t(gpu::GroupCount(invocations, kLocalSize)),
-                                    /*barrier=*/d + 1 == dispatches);
+    kernels_->RecordDispatch(cmd_, pipeline, &push,
+                             uint32_t(gpu::GroupCount(invocations, kLocalSize)),
+                             /*barrier=*/d + 1 == dispatches);
   }
   REFLCAP_RETURN_IF_ERROR(cmd_.SubmitAndWait());
   std::vector<sh::FitGpuControl> control(dispatches);

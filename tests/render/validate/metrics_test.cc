@@ -310,7 +310,9 @@ TEST(Metrics, ScoreImageSsimIsSsimSumOfTheToneMappedImages) {
     }
     EXPECT_EQ(s.raw.ssim_sum, SsimSum(photo_tm, render_tm, mask)) << keep;
     EXPECT_EQ(s.scaled.ssim_sum, SsimSum(photo_tm, scaled_tm, mask)) << keep;
-    if (keep) EXPECT_EQ(s.photo_tm.data, photo_tm.data);
+    if (keep) {
+      EXPECT_EQ(s.photo_tm.data, photo_tm.data);
+    }
   }
 }
 
