@@ -75,7 +75,11 @@ int RunInfo(int argc, char** argv) {
                 files.normal_map_texels);
   }
   std::printf("ground truth %s\n", c.ground_truth_json.empty() ? "no" : "yes");
-  std::printf("ok: every field, the geometry and %zu image headers are valid\n", files.images_checked);
+  std::printf("ok: every field, the geometry and %zu image headers are valid", files.images_checked);
+  if (files.variance_images_checked > 0) {
+    std::printf(" (and %zu variance image headers)", files.variance_images_checked);
+  }
+  std::printf("\n");
   return 0;
 }
 

@@ -48,11 +48,16 @@ int RunResample(int argc, char** argv) {
                "with --backend vulkan: also run the Embree tests and write their agreement with "
                "the Vulkan masks as mask_agreement into resample_report.json");
   args.AddDouble("noise-sigma", &photon_sigma,
-                 StrCat("photon noise std at pixel value 1 (default: the capture's "
+                 StrCat("photon noise std at pixel value 1, for photographs weighted by the noise "
+                        "model (default: the capture's "
                         "ground_truth.noise, else ", resample::kDefaultPhotonSigma, ")"));
   args.AddDouble("read-sigma", &read_sigma,
                  StrCat("read noise std; the dark floor is 3x this (default: the capture's, else ",
                         resample::kDefaultReadSigma, ")"));
+  args.AddFlag("variance-weights", &options.use_variance,
+               "weight the samples of a photograph that has images[].variance (e.g. from reflcap "
+               "hdr) by that per-pixel variance, and take its dark/invalid tests from it (default: "
+               "the noise model for every photograph)");
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite,
                "replace SAMPLES if it exists (only once the new one is complete)");

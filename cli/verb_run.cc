@@ -157,6 +157,9 @@ int RunRun(int argc, char** argv) {
   args.AddInt("atlas-res", &options.resample.atlas_resolution,
               "atlas resolution R (default: the capture's ground truth atlas, else 512)");
   args.AddDouble("min-cos", &options.resample.min_cos, "sample acceptance: n.l and n.v above this (default 0.15)");
+  args.AddFlag("variance-weights", &options.resample.use_variance,
+               "resample: weight photographs that have images[].variance by it (default: the "
+               "noise model)");
   args.AddString("backend", &backend, "NAME",
                  "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");

@@ -219,7 +219,8 @@ StatusOr<std::unique_ptr<ImageResampler>> ImageResampler::Create(const Capture& 
   return r;
 }
 
-Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels) {
+Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels,
+                       const Image* variance) {
   if (image_index >= capture.images.size()) {
     return InvalidArgumentError("image index ", image_index, " out of range");
   }
@@ -231,13 +232,15 @@ Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image
                                 pixels.channels, ", expected ", camera.width, "x", camera.height,
                                 " RGB");
   }
+  if (variance != nullptr) return CheckVarianceImage(capture, image_index, *variance);
   return OkStatus();
 }
 
-Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageOutput* out) const {
+Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageOutput* out,
+                              const Image* variance) const {
   const Capture& capture = *capture_;
   const TexelAtlas& atlas = *atlas_;
-  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels));
+  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels, variance));
   const CaptureImage& image = capture.images[image_index];
   const Camera& camera = capture.cameras[image.camera];
   const std::string field = StrCat(capture.json_path.string(), ": images[", image_index, "].file");
@@ -288,13 +291,13 @@ Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageO
           const int64_t end = std::min<int64_t>(int64_t(texels), begin + kBlockTexels);
           if (scene_ != nullptr) {
             uint64_t rays[4] = {0, 0, 0, 0};
-            ProcessMeshBlock(f, pixels, image_index, begin, end, out, &kept[b], rays);
+            ProcessMeshBlock(f, pixels, variance, image_index, begin, end, out, &kept[b], rays);
             visibility += rays[0];
             shadow += rays[1];
             primary += rays[2];
             tap_shadow += rays[3];
           } else {
-            ProcessNormalMapBlock(f, pixels, image_index, begin, end, out, &kept[b]);
+            ProcessNormalMapBlock(f, pixels, variance, image_index, begin, end, out, &kept[b]);
           }
         }
       },
@@ -314,10 +317,11 @@ namespace {
 
 // Reads the taps of a texel and, when they are usable, turns them into a BRDF sample.
 // wi, wo: unit, object frame; cos_i = n_s·wi; irradiance_per_cos = I / d² (or I).
-Outcome MakeSample(const Image& pixels, const Taps& taps, int tap_count, const NoiseModel& noise,
-                   float saturation, float exposure, const Vec3f& irradiance_per_cos, float cos_i,
-                   const Vec3f& wi_local, const Vec3f& wo_local, uint32_t image_index,
-                   BrdfSample* sample) {
+// variance: the photograph's variance image, or nullptr for the noise model.
+Outcome MakeSample(const Image& pixels, const Image* variance, const Taps& taps, int tap_count,
+                   const NoiseModel& noise, float saturation, float exposure,
+                   const Vec3f& irradiance_per_cos, float cos_i, const Vec3f& wi_local,
+                   const Vec3f& wo_local, uint32_t image_index, BrdfSample* sample) {
   for (int k = 0; k < tap_count; ++k) {
     if (taps.w[k] == 0) continue;
     const float* p = pixels.pixel(taps.x[k], taps.y[k]);
@@ -333,8 +337,15 @@ Outcome MakeSample(const Image& pixels, const Taps& taps, int tap_count, const N
     value += taps.w[k] * Vec3f(p[0], p[1], p[2]);
   }
   const float max_channel = value.maxCoeff();
-  if (value.minCoeff() < float(noise.InvalidFloor())) return Outcome::kInvalid;
-  if (max_channel <= float(noise.DarkFloor())) return Outcome::kDark;
+  Vec3f measured = Vec3f::Zero();  // Σ w_k² var_k when the photograph has a variance image
+  if (variance == nullptr) {
+    if (value.minCoeff() < float(noise.InvalidFloor())) return Outcome::kInvalid;
+    if (max_channel <= float(noise.DarkFloor())) return Outcome::kDark;
+  } else {
+    measured = MeasuredVariance(*variance, taps.x, taps.y, taps.w, tap_count);
+    if (MeasuredInvalid(value, measured)) return Outcome::kInvalid;
+    if (MeasuredDark(value, measured)) return Outcome::kDark;
+  }
   for (int c = 0; c < 3; ++c) {
     sample->wi[c] = wi_local[c];
     sample->wo[c] = wo_local[c];
@@ -345,10 +356,14 @@ Outcome MakeSample(const Image& pixels, const Taps& taps, int tap_count, const N
       sample->weight[c] = 0;
       continue;
     }
-    const double variance = noise.PixelVariance(value[c], max_channel) / (scale * scale);
+    const double pixel_variance = variance == nullptr
+                                      ? noise.PixelVariance(value[c], max_channel)
+                                      : MeasuredPixelVariance(measured[c], max_channel);
+    const double sample_variance = pixel_variance / (scale * scale);
     sample->value[c] = float(value[c] / scale);
-    // variance > 0: max_channel > DarkFloor >= 0 makes the relative floor positive.
-    const double weight = 1.0 / variance;
+    // sample_variance > 0: a sample that is not dark has max_channel > 0 (noise model:
+    // > DarkFloor >= 0; variance image: some channel > 3 σ >= 0), so the relative floor is > 0.
+    const double weight = 1.0 / sample_variance;
     sample->weight[c] = std::isfinite(weight) && float(weight) < std::numeric_limits<float>::max()
                             ? float(weight)
                             : std::numeric_limits<float>::max();
@@ -371,9 +386,10 @@ void ToTangentFrame(const Vec3f& tangent, const Vec3f& n_s, const Vec3f& wi, con
 
 }  // namespace
 
-void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, uint32_t image_index,
-                                      int64_t begin, int64_t end, ImageOutput* out,
-                                      std::vector<TexelSample>* kept, uint64_t* rays) const {
+void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const Image* variance,
+                                      uint32_t image_index, int64_t begin, int64_t end,
+                                      ImageOutput* out, std::vector<TexelSample>* kept,
+                                      uint64_t* rays) const {
   const TexelAtlas& atlas = *atlas_;
   const Camera& camera = *f.camera;
   const float offset = scene_->SurfaceOffset();
@@ -536,7 +552,7 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, uint3
                    &wo_local);
     TexelSample s;
     s.texel = c.texel;
-    outcome = MakeSample(pixels, taps, 4, noise_, f.saturation, f.exposure,
+    outcome = MakeSample(pixels, variance, taps, 4, noise_, f.saturation, f.exposure,
                          f.intensity * c.inv_d2, c.cos_i, wi_local, wo_local, image_index,
                          &s.sample);
     set(c.texel, outcome);
@@ -610,8 +626,8 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
 }
 
 void ImageResampler::ProcessNormalMapBlock(const Frame& f, const Image& pixels,
-                                           uint32_t image_index, int64_t begin, int64_t end,
-                                           ImageOutput* out,
+                                           const Image* variance, uint32_t image_index,
+                                           int64_t begin, int64_t end, ImageOutput* out,
                                            std::vector<TexelSample>* kept) const {
   const TexelAtlas& atlas = *atlas_;
   for (int64_t ti = begin; ti < end; ++ti) {
@@ -641,9 +657,9 @@ void ImageResampler::ProcessNormalMapBlock(const Frame& f, const Image& pixels,
     Taps taps{{x, x, x, x}, {y, y, y, y}, {1, 0, 0, 0}};
     TexelSample s;
     s.texel = t;
-    const Outcome outcome = MakeSample(pixels, taps, 1, noise_, f.saturation, f.exposure,
-                                       f.intensity, cos_i, wi_local, wo_local, image_index,
-                                       &s.sample);
+    const Outcome outcome =
+        MakeSample(pixels, variance, taps, 1, noise_, f.saturation, f.exposure, f.intensity, cos_i,
+                   wi_local, wo_local, image_index, &s.sample);
     out->outcome[t] = uint8_t(outcome);
     if (outcome == Outcome::kKept) kept->push_back(s);
   }

@@ -20,6 +20,13 @@
 // every tap finite (else kInvalid), no tap clipped, the interpolated value not negative beyond
 // the noise (else kInvalid) and above the noise floor.
 //
+// The noise of a sample comes from the photograph's variance image when the capture gives one
+// (images[].variance, e.g. from `reflcap hdr`'s merge): the interpolated value Σ w_k p_k of
+// independent pixels has variance Σ w_k² var_k (MeasuredVariance below), to which the relative
+// floor is added as in the noise model; otherwise from the noise model (NoiseModel). Either
+// variance, divided by the sample's scale² (the value's own scaling), gives the weight 1 / var,
+// and the same noise decides the invalid and dark tests.
+//
 // The tap tests read a per-image "pixel map" of what the camera ray through each pixel centre
 // sees (hit or background, depth, lit), filled lazily: a block casts the pixels its candidates'
 // taps need that no block has cast yet (Intersect16 and Occluded16 packets). Neighbouring texels
@@ -29,6 +36,7 @@
 // Normal-map captures (no mesh) take the texel's own pixel as its projection, and every texel is
 // visible and unshadowed by construction (no occlusion, shadow or tap rays are cast).
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -38,6 +46,7 @@
 #include "engine/capture/capture.h"
 #include "engine/core/status.h"
 #include "engine/image/image.h"
+#include "engine/math/types.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
 
@@ -115,6 +124,46 @@ struct NoiseModel {
   double InvalidFloor() const { return -kInvalidSigmas * read_sigma; }
 };
 
+// ---- Noise from a variance image (images[].variance) --------------------------------------------
+// C++ twins of masks.comp's functions of the same names; float, in the GPU's order of operations.
+
+// Variance of the bilinear interpolation Σ_k w_k p_k of `tap_count` taps of independent pixels
+// whose variances are in `variance` (3 channels): Σ_k w_k² var_k per channel. Taps of weight 0
+// are skipped (they may lie outside the image).
+inline Vec3f MeasuredVariance(const Image& variance, const int* x, const int* y, const float* w,
+                              int tap_count) {
+  Vec3f var = Vec3f::Zero();
+  for (int k = 0; k < tap_count; ++k) {
+    if (w[k] == 0) continue;
+    const float* v = variance.pixel(x[k], y[k]);
+    const float w2 = w[k] * w[k];
+    var += w2 * Vec3f(v[0], v[1], v[2]);
+  }
+  return var;
+}
+// Invalid: some channel below -kInvalidSigmas of its own standard deviation (the noise model's
+// InvalidFloor with the measured σ in place of read_sigma).
+inline bool MeasuredInvalid(const Vec3f& value, const Vec3f& var) {
+  for (int c = 0; c < 3; ++c) {
+    if (value[c] < -float(kInvalidSigmas) * std::sqrt(var[c])) return true;
+  }
+  return false;
+}
+// Dark: every channel at or below kDarkSigmas of its own standard deviation — no channel is
+// measured above the noise (signal-to-noise ratio <= 3; with zero variance only values <= 0).
+inline bool MeasuredDark(const Vec3f& value, const Vec3f& var) {
+  for (int c = 0; c < 3; ++c) {
+    if (!(value[c] <= float(kDarkSigmas) * std::sqrt(var[c]))) return false;
+  }
+  return true;
+}
+// Variance credited to one channel of a kept sample (pixel units²): the measured variance plus
+// the relative floor NoiseModel::PixelVariance applies (kRelativeSigmaFloor · max channel)².
+inline double MeasuredPixelVariance(float var, float max_channel) {
+  const double floor = kRelativeSigmaFloor * max_channel;
+  return double(var) + floor * floor;
+}
+
 // What one photograph gave.
 struct ImageOutput {
   std::vector<uint8_t> outcome;   // per texel: Outcome
@@ -126,8 +175,10 @@ struct ImageOutput {
 
 // The checks every resampling path makes of photograph `image_index` before it reads `pixels`:
 // an index within the capture's images, and an RGB image of its camera's size. InvalidArgument
-// naming the capture file and the image's field otherwise.
-Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels);
+// naming the capture file and the image's field otherwise. With `variance` (not null), also
+// CheckVarianceImage (engine/capture/capture.h): RGB, the camera's size, finite and >= 0.
+Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels,
+                       const Image* variance = nullptr);
 
 class ImageResampler {
  public:
@@ -144,7 +195,10 @@ class ImageResampler {
 
   // Resamples capture.images[image_index] whose pixels are `pixels` (3 channels, the camera's
   // size; else InvalidArgument naming images[i].file). Samples carry image = image_index.
-  Status Process(uint32_t image_index, const Image& pixels, ImageOutput* out) const;
+  // `variance`: the photograph's variance image (ReadVarianceImage), whose values replace the
+  // noise model for this photograph; nullptr = the noise model. Checked as CheckPhotograph says.
+  Status Process(uint32_t image_index, const Image& pixels, ImageOutput* out,
+                 const Image* variance = nullptr) const;
 
   // True when a normal-map capture: no ray is cast.
   bool normal_map() const { return scene_ == nullptr; }
@@ -152,14 +206,14 @@ class ImageResampler {
  private:
   ImageResampler() = default;
   struct Frame;
-  void ProcessMeshBlock(const Frame& frame, const Image& pixels, uint32_t image_index, int64_t begin,
-                        int64_t end, ImageOutput* out, std::vector<TexelSample>* kept,
-                        uint64_t* rays) const;
+  void ProcessMeshBlock(const Frame& frame, const Image& pixels, const Image* variance,
+                        uint32_t image_index, int64_t begin, int64_t end, ImageOutput* out,
+                        std::vector<TexelSample>* kept, uint64_t* rays) const;
   // Casts the camera ray (and, for a hit facing the light, the shadow ray) of every listed pixel
   // (y * width + x) and publishes the results in the frame's pixel map.
   void CastPixels(const Frame& frame, const std::vector<uint32_t>& pixels, uint64_t* rays) const;
-  void ProcessNormalMapBlock(const Frame& frame, const Image& pixels, uint32_t image_index,
-                             int64_t begin, int64_t end, ImageOutput* out,
+  void ProcessNormalMapBlock(const Frame& frame, const Image& pixels, const Image* variance,
+                             uint32_t image_index, int64_t begin, int64_t end, ImageOutput* out,
                              std::vector<TexelSample>* kept) const;
 
   const Capture* capture_ = nullptr;

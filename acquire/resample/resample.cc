@@ -334,38 +334,56 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   TexelCoverage coverage(texels);
   std::array<uint64_t, kOutcomeCount> outcome_counts{};
   uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
+  uint64_t variance_images = 0;  // photographs weighted by their images[].variance
   double read_wait_s = 0, resample_s = 0, stream_s = 0;
-  auto read_image = [&capture](uint32_t index) {
-    const fs::path path = capture.Resolve(capture.images[index].file);
-    return std::async(std::launch::async, [path] { return ReadImageRgb(path); });
+  // A photograph and, when it has one and it is used, its variance image (read together).
+  struct Photograph {
+    StatusOr<Image> pixels = Image();
+    std::optional<StatusOr<Image>> variance;
+  };
+  const bool use_variance = options.use_variance;
+  auto read_image = [&capture, use_variance](uint32_t index) {
+    return std::async(std::launch::async, [&capture, use_variance, index] {
+      Photograph photo;
+      photo.pixels = ReadImageRgb(capture.Resolve(capture.images[index].file));
+      if (photo.pixels.ok() && use_variance && !capture.images[index].variance.empty()) {
+        photo.variance = ReadVarianceImage(capture, index);
+      }
+      return photo;
+    });
   };
   Progress progress("resample", int64_t(order.size()));
-  std::future<StatusOr<Image>> next = read_image(order[0].second);
+  std::future<Photograph> next = read_image(order[0].second);
   ImageOutput output, embree_output;
   CameraMapView camera_map;
   for (size_t k = 0; k < order.size(); ++k) {
     const uint32_t index = order[k].second;
     auto t0 = Clock::now();
-    StatusOr<Image> pixels = next.get();
+    Photograph photo = next.get();
     read_wait_s += Seconds(t0);
     if (k + 1 < order.size()) next = read_image(order[k + 1].second);
+    const StatusOr<Image>& pixels = photo.pixels;
     if (!pixels.ok()) {
       return Status(pixels.status().code(),
                     StrCat(file, ": images[", index, "].file: ", pixels.status().message()));
     }
+    // ReadVarianceImage's errors already name capture.json and images[i].variance.
+    if (photo.variance && !photo.variance->ok()) return photo.variance->status();
+    const Image* variance = photo.variance ? &photo.variance->value() : nullptr;
+    variance_images += variance != nullptr;
     t0 = Clock::now();
     if (masks != nullptr) {
-      REFLCAP_RETURN_IF_ERROR(
-          masks->Process(index, *pixels, &output, cross_check ? &camera_map : nullptr));
+      REFLCAP_RETURN_IF_ERROR(masks->Process(index, *pixels, &output,
+                                             cross_check ? &camera_map : nullptr, variance));
       gpu_s += masks->last_stats().gpu_seconds;
       mask_stats = masks->last_stats();
     } else {
-      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output));
+      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output, variance));
     }
     resample_s += Seconds(t0);
     if (cross_check) {
       t0 = Clock::now();
-      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &embree_output));
+      REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &embree_output, variance));
       agreement.Add(atlas.position, embree_output.outcome, output.outcome, embree_output.kept,
                     output.kept, camera_map);
       cross_check_s += Seconds(t0);
@@ -516,6 +534,12 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   const uint64_t pairs = uint64_t(texels) * order.size();
   const double total_s = Seconds(start);
+  uint64_t ignored_variance_images = 0;  // selected photographs whose variance was not used
+  if (!options.use_variance) {
+    for (const auto& entry : order) {
+      ignored_variance_images += !capture.images[entry.second].variance.empty();
+    }
+  }
   Json report = {
       {"format", "reflcap-resample-report/1"},
       {"capture", info.capture},
@@ -541,7 +565,19 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                        {"relative_sigma_floor", kRelativeSigmaFloor},
                        {"dark_floor", noise.model.DarkFloor()},
                        {"invalid_below", noise.model.InvalidFloor()},
-                       {"source", noise.model.source}}},
+                       {"source", noise.model.source},
+                       {"variance_images", variance_images},
+                       {"variance_images_ignored", ignored_variance_images},
+                       {"weights",
+                        variance_images == 0
+                            ? "the noise model for every photograph"
+                            : variance_images == order.size()
+                                  ? "every photograph's variance image (images[].variance): var = "
+                                    "sum_k w_k^2 var_k over the bilinear taps + (relative floor x "
+                                    "max channel)^2; dark: every channel <= 3 sigma; invalid: a "
+                                    "channel < -5 sigma"
+                                  : "the variance image (images[].variance) where a photograph "
+                                    "has one (see variance_images), the noise model elsewhere"}}},
       {"atlas", {{"width", atlas.width}, {"height", atlas.height}, {"source", atlas_source}}},
       {"images", order.size()},
       {"images_skipped", skipped},
@@ -687,6 +723,16 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                 domain["cells_per_texel"]["p50"].get<double>(), kDomainCells,
                 100.0 * near_json["5"].get<double>());
   text << line;
+  if (variance_images > 0 || ignored_variance_images > 0) {
+    std::snprintf(line, sizeof line,
+                  "  weights: per-pixel variance (images[].variance) for %llu of %zu images%s%s\n",
+                  (unsigned long long)variance_images, order.size(),
+                  variance_images < order.size() ? ", noise model for the rest" : "",
+                  ignored_variance_images > 0
+                      ? " (the capture has variance images; --variance-weights uses them)"
+                      : "");
+    text << line;
+  }
   if (masks != nullptr) {
     std::snprintf(line, sizeof line, "  backend vulkan on %s (light map: %s, %d px)\n",
                   device.c_str(), mask_stats.light_map.c_str(), mask_stats.light_resolution);

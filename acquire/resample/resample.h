@@ -16,10 +16,12 @@
 //   domain.exr                               per texel: views, domain cells, min half-vector angle
 //
 // Acceptance of a (texel, image) pair, the rejection reasons and their order: image_resampler.h.
-// BRDF value = pixel / (exposure_s · E) per channel, weight = 1 / var(value) from the noise model
-// (NoiseModel): ground_truth.noise of a synthetic capture, else kDefaultPhotonSigma /
-// kDefaultReadSigma, either overridden by the options. A pixel clips at images[].saturation, or
-// at ground_truth.noise.saturation for an image that has none.
+// BRDF value = pixel / (exposure_s · E) per channel, weight = 1 / var(value): from the
+// photograph's variance image where the capture gives one (images[].variance, read beside the
+// photograph and checked whole: ReadVarianceImage), else from the noise model (NoiseModel):
+// ground_truth.noise of a synthetic capture, else kDefaultPhotonSigma / kDefaultReadSigma, either
+// overridden by the options. A pixel clips at images[].saturation, or at
+// ground_truth.noise.saturation for an image that has none.
 //
 // Memory stays bounded whatever the number of images: one photograph (plus the one being read),
 // the atlas, the scene, per-texel counters, and the writer's buffer budget (the 1,008,600-texel
@@ -89,6 +91,12 @@ struct ResampleOptions {
   // kDefaultPhotonSigma / kDefaultReadSigma.
   std::optional<double> photon_sigma;
   std::optional<double> read_sigma;
+  // Weight the samples of a photograph with a variance image (images[].variance) by that
+  // variance; false: the noise model weights every photograph and no variance image is read.
+  // Off by default: on the merged suzanne brackets the fit's residuals are model error, not
+  // noise, and the measured variance (which down-weights the highlights) lost up to 0.5 dB of
+  // holdout PSNR against the noise model (README, "Per-pixel variance").
+  bool use_variance = false;
   uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
   size_t spill_buffer_bytes = kDefaultSpillBufferBytes;
   int threads = 0;  // 0 = all cores
@@ -111,7 +119,8 @@ struct ResampleSummary {
 
 // Resamples the capture at `capture_path` (capture.json or its folder) into `out_dir`, which
 // must exist (the caller stages it: nothing is written anywhere else). Errors: those of
-// ReadCapture/ValidateCaptureFiles and of reading images (naming capture.json and the field),
+// ReadCapture/ValidateCaptureFiles and of reading images and variance images (naming
+// capture.json and the field: a missing file, a wrong size, a NaN, Inf or negative variance),
 // Unavailable for Backend::kVulkan without a usable Vulkan device, InvalidArgument for bad
 // options.
 StatusOr<ResampleSummary> ResampleCapture(const std::filesystem::path& capture_path,

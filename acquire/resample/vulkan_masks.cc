@@ -58,7 +58,11 @@ static_assert(sizeof(sh::MaskDrawPush) == sizeof(sh::LightMapPush),
 // Descriptor bindings (shaders/resample/masks_common.glsl).
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindLightMap = 3,
                    kBindCameraMap = 4, kBindTexels = 5, kBindRays = 6, kBindPixels = 7,
-                   kBindOutcomes = 8, kBindSamples = 9;
+                   kBindOutcomes = 8, kBindSamples = 9, kBindVariance = 10;
+// MaskParams::relative_sigma_floor.y: 1 when binding 10 holds the photograph's variance image
+// (images[].variance) and masks.comp takes each sample's noise from it (z, w: kDarkSigmas and
+// kInvalidSigmas), 0 when the noise model (MaskParams::noise) applies.
+constexpr float kUseVarianceImage = 1.0f;
 // Camera-map texels around the undistorted footprint of a distorted photograph: nearest-texel
 // rounding reaches half a texel beyond the outermost pixel ray.
 constexpr int kMapMargin = 2;
@@ -129,7 +133,7 @@ struct VulkanMasks::Impl {
   Pipeline camera_pipeline, texel_pipeline;
 
   std::unique_ptr<Buffer> params, corners, triangle_normals, texels, pixels, outcomes, samples,
-      map_readback, no_rays;
+      map_readback, no_rays, variances;
   std::map<int, CameraGrid> grids;  // by camera index
   std::unique_ptr<PassTarget> camera_target;
   uint32_t triangle_count = 0;
@@ -171,7 +175,8 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                                                            {kBindRays, kSsbo, kComp},
                                                            {kBindPixels, kSsbo, kComp},
                                                            {kBindOutcomes, kSsbo, kComp},
-                                                           {kBindSamples, kSsbo, kComp}}));
+                                                           {kBindSamples, kSsbo, kComp},
+                                                           {kBindVariance, kSsbo, kComp}}));
   REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
   REFLCAP_ASSIGN_OR_RETURN(
       texel_pipeline,
@@ -387,10 +392,10 @@ StatusOr<std::unique_ptr<VulkanMasks>> VulkanMasks::Create(const Capture& captur
 }
 
 Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutput* out,
-                            CameraMapView* map) {
+                            CameraMapView* map, const Image* variance) {
   Impl& m = *impl_;
   const Capture& capture = *m.capture;
-  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels));
+  REFLCAP_RETURN_IF_ERROR(CheckPhotograph(capture, image_index, pixels, variance));
   const CaptureImage& image = capture.images[image_index];
   const Camera& camera = capture.cameras[image.camera];
   const std::string field = StrCat(capture.json_path.string(), ": images[", image_index, "].file");
@@ -450,7 +455,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
              float(m.surface_offset)};
   p.bias = {float(m.options.light_bias_texels), float(m.options.plane_limit_footprints),
             float(m.options.camera_bias_pixels), float(m.options.plane_limit_footprints)};
-  p.relative_sigma_floor = {float(kRelativeSigmaFloor), 0, 0, 0};
+  p.relative_sigma_floor = {float(kRelativeSigmaFloor), variance != nullptr ? kUseVarianceImage : 0,
+                            float(kDarkSigmas), float(kInvalidSigmas)};
   p.flags = (pinhole ? sh::kMaskFlagPinhole : 0u) | (point_light ? sh::kMaskFlagPointLight : 0u) |
             (pinhole && camera.HasDistortion() ? sh::kMaskFlagDistortion : 0u);
   p.width = uint32_t(w);
@@ -494,6 +500,12 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   }
   REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.pixels, pixel_bytes));
   std::memcpy(m.pixels->mapped(), pixels.data.data(), pixel_bytes);
+  if (variance != nullptr) {
+    REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(ctx, &m.variances, pixel_bytes));
+    std::memcpy(m.variances->mapped(), variance->data.data(), pixel_bytes);
+  }
+  // Without a variance image binding 10 must still hold a buffer; the shader does not read it.
+  const Buffer& variance_buffer = variance != nullptr ? *m.variances : *m.pixels;
   std::memcpy(m.params->mapped(), &p, sizeof(p));
   REFLCAP_RETURN_IF_ERROR(m.light_pass.EnsureTarget(ctx, uint32_t(res), views));
   REFLCAP_RETURN_IF_ERROR(m.EnsureCameraTarget(p.map_width, p.map_height));
@@ -517,6 +529,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
                     count * sizeof(sh::MaskTexel));
     set.WriteBuffer(kBindRays, rays);
     set.WriteBuffer(kBindPixels, *m.pixels, 0, pixel_bytes);
+    set.WriteBuffer(kBindVariance, variance_buffer, 0, pixel_bytes);
     set.WriteBuffer(kBindOutcomes, *m.outcomes, first * sizeof(uint32_t), count * sizeof(uint32_t));
     set.WriteBuffer(kBindSamples, *m.samples, first * sizeof(sh::MaskSample),
                     count * sizeof(sh::MaskSample));

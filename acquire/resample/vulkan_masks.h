@@ -19,7 +19,9 @@
 //   3. masks.comp, one invocation per texel: view grazing, projection, occlusion (camera map,
 //      receiver-plane depth), light grazing, cast shadow (light map), footprint (every bilinear
 //      tap's camera-map texel a hit within the edge depth tolerance, and lit), pixel tests, and
-//      the sample (value, weight, wi/wo in the tangent frame).
+//      the sample (value, weight, wi/wo in the tangent frame). With the photograph's variance
+//      image (images[].variance) bound, the pixel tests and weights take their noise from it
+//      exactly as the CPU does (MeasuredVariance and its neighbours in image_resampler.h).
 //
 // Depth bias (shaders/resample/masks_common.glsl): a point is hidden when the map's distance is
 // below the receiver-plane distance minus bias = surface offset (RayScene::SurfaceOffset, the
@@ -100,9 +102,10 @@ class VulkanMasks {
   VulkanMasks& operator=(const VulkanMasks&) = delete;
 
   // ImageResampler::Process on the GPU (ray counts stay 0). When `map` is not null it receives
-  // the photograph's camera map (for MaskAgreement).
+  // the photograph's camera map (for MaskAgreement). `variance`: the photograph's variance image
+  // (as ImageResampler::Process), nullptr = the noise model.
   Status Process(uint32_t image_index, const Image& pixels, ImageOutput* out,
-                 CameraMapView* map = nullptr);
+                 CameraMapView* map = nullptr, const Image* variance = nullptr);
 
   // The Vulkan device's name ("llvmpipe (LLVM 15.0.6, 256 bits)").
   const std::string& device_name() const;

@@ -26,7 +26,7 @@ StatusOr<std::unique_ptr<VulkanMasks>> VulkanMasks::Create(const Capture&, const
   return UnavailableError(kNoVulkan);
 }
 
-Status VulkanMasks::Process(uint32_t, const Image&, ImageOutput*, CameraMapView*) {
+Status VulkanMasks::Process(uint32_t, const Image&, ImageOutput*, CameraMapView*, const Image*) {
   return UnavailableError(kNoVulkan);
 }
 

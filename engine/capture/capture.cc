@@ -3,6 +3,7 @@
 // Validation is complete and eager: the first problem found is returned.
 #include "engine/capture/capture.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <set>
@@ -282,6 +283,14 @@ StatusOr<Light> ParseLight(const FieldReader& r, const Json& j, const std::strin
   return light;
 }
 
+// True when `name` ends in ".exr" (any case): a variance image must be a float OpenEXR file (an
+// 8-bit PNG cannot hold variances spanning the many decades of an HDR photograph).
+bool HasExrExtension(const std::string& name) {
+  std::string ext = fs::path(name).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".exr";
+}
+
 StatusOr<CaptureImage> ParseImage(const FieldReader& r, const Json& j, const std::string& at,
                                   const Capture& capture) {
   if (!j.is_object()) return r.Error(at, "must be an object");
@@ -320,7 +329,26 @@ StatusOr<CaptureImage> ParseImage(const FieldReader& r, const Json& j, const std
     REFLCAP_ASSIGN_OR_RETURN(image.saturation, r.Number(*it, at + ".saturation"));
     if (image.saturation < 0) return r.Error(at + ".saturation", "must not be negative");
   }
+  if (auto it = j.find("variance"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(image.variance, r.String(*it, at + ".variance"));
+    if (!HasExrExtension(image.variance)) {
+      return r.Error(at + ".variance",
+                     StrCat("\"", image.variance, "\" must name an OpenEXR file (.exr): float "
+                            "RGB, the variance of each pixel value"));
+    }
+    if (image.variance == image.file) {
+      return r.Error(at + ".variance", StrCat("\"", image.variance, "\" is the photograph itself"));
+    }
+  }
   return image;
+}
+
+// "B, G, R" (or "none").
+std::string JoinChannelNames(const std::vector<std::string>& names) {
+  if (names.empty()) return "none";
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
 }
 
 // 1-based line and column of a byte offset.
@@ -523,8 +551,80 @@ Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) 
                                   "x", cam.height);
     }
     ++out.images_checked;
+    if (!image.variance.empty()) {
+      const std::string vfield = StrCat("images[", i, "].variance");
+      auto vinfo = ReadExrInfo(capture.Resolve(image.variance));
+      if (!vinfo.ok()) return field_error(vfield, vinfo.status());
+      if (vinfo->width != cam.width || vinfo->height != cam.height) {
+        return InvalidArgumentError(file, ": ", vfield, ": ", image.variance, " is ", vinfo->width,
+                                    "x", vinfo->height, " but camera \"", cam.id, "\" is ",
+                                    cam.width, "x", cam.height, " (the photograph's size)");
+      }
+      // OpenEXR lists channels sorted by name.
+      if (vinfo->channel_names != std::vector<std::string>{"B", "G", "R"}) {
+        return InvalidArgumentError(file, ": ", vfield, ": ", image.variance, " has ",
+                                    vinfo->channels,
+                                    vinfo->channels == 1 ? " channel" : " channels", " (",
+                                    JoinChannelNames(vinfo->channel_names),
+                                    "); a variance image has exactly R, G and B, one per channel "
+                                    "of the photograph");
+      }
+      ++out.variance_images_checked;
+    }
   }
   return OkStatus();
+}
+
+Status CheckVarianceImage(const Capture& capture, size_t index, const Image& variance) {
+  const std::string file = capture.json_path.string();
+  if (index >= capture.images.size()) {
+    return InvalidArgumentError(file, ": image index ", index, " out of range");
+  }
+  const CaptureImage& image = capture.images[index];
+  const Camera& cam = capture.cameras[image.camera];
+  const std::string field = StrCat(file, ": images[", index, "].variance: ", image.variance);
+  if (variance.width != cam.width || variance.height != cam.height || variance.channels != 3) {
+    return InvalidArgumentError(field, " is ", variance.width, "x", variance.height, "x",
+                                variance.channels, ", expected ", cam.width, "x", cam.height,
+                                " RGB (camera \"", cam.id, "\")");
+  }
+  size_t bad = 0, first = 0;
+  for (size_t k = 0; k < variance.data.size(); ++k) {
+    const float v = variance.data[k];
+    // !(v >= 0) also catches NaN.
+    if (!(v >= 0) || !std::isfinite(v)) {
+      if (bad++ == 0) first = k;
+    }
+  }
+  if (bad > 0) {
+    const size_t pixel = first / 3;
+    const float v = variance.data[first];
+    const char* what = std::isnan(v) ? "NaN" : !std::isfinite(v) ? "infinite" : "negative";
+    return InvalidArgumentError(field, ": pixel (", pixel % size_t(variance.width), ", ",
+                                pixel / size_t(variance.width), ") channel ", "RGB"[first % 3],
+                                " is ", what, " (", v,
+                                "); every variance must be finite and >= 0 (", bad,
+                                bad == 1 ? " bad value)" : " bad values)");
+  }
+  return OkStatus();
+}
+
+StatusOr<Image> ReadVarianceImage(const Capture& capture, size_t index) {
+  const std::string file = capture.json_path.string();
+  if (index >= capture.images.size()) {
+    return InvalidArgumentError(file, ": image index ", index, " out of range");
+  }
+  const CaptureImage& image = capture.images[index];
+  if (image.variance.empty()) {
+    return InvalidArgumentError(file, ": images[", index, "].variance: not given");
+  }
+  auto variance = ReadExrRgb(capture.Resolve(image.variance));
+  if (!variance.ok()) {
+    return Status(variance.status().code(), StrCat(file, ": images[", index, "].variance: ",
+                                                   variance.status().message()));
+  }
+  REFLCAP_RETURN_IF_ERROR(CheckVarianceImage(capture, index, *variance));
+  return std::move(*variance);
 }
 
 namespace {
@@ -592,6 +692,7 @@ std::string CaptureToJson(const Capture& capture) {
               {"exposure_s", image.exposure_s},
               {"split", SplitName(image.split)}};
     if (image.saturation > 0) j["saturation"] = image.saturation;
+    if (!image.variance.empty()) j["variance"] = image.variance;
     images.push_back(j);
   }
   root["images"] = images;

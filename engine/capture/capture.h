@@ -8,7 +8,10 @@
 //   "data/capture.json: cameras[1].K: not invertible (fx*fy = 0)".
 // Extensions reflcap reads beyond the format text (optional; older readers ignore them):
 //   cameras[].pixel_size_m   orthographic cameras: metres per pixel (needed to render a mesh);
-//   images[].saturation      pixel value at and above which a pixel is clipped (0 or absent: none).
+//   images[].saturation      pixel value at and above which a pixel is clipped (0 or absent: none);
+//   images[].variance        a float RGB OpenEXR file of the variance of every pixel value of the
+//                            photograph (its units squared), e.g. from an HDR merge (`reflcap
+//                            hdr`); the resampler weights samples by it instead of a noise model.
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -17,6 +20,7 @@
 #include "engine/camera/camera.h"
 #include "engine/core/status.h"
 #include "engine/geometry/rigid3.h"
+#include "engine/image/image.h"
 #include "engine/math/types.h"
 
 namespace reflcap {
@@ -43,6 +47,8 @@ struct CaptureImage {
   double exposure_s = 1;   // pixel value = exposure_s * radiance
   Split split = Split::kTrain;
   double saturation = 0;   // pixel value at which the sensor clips; 0 = unknown / none
+  std::string variance;    // relative to the capture's folder: float RGB EXR, the variance of
+                           // each pixel value of `file` (its units squared); "" = none
 };
 
 struct NormalMapGeometry {
@@ -83,11 +89,21 @@ struct CaptureFilesReport {
   size_t mesh_degenerate_skipped = 0;
   size_t normal_map_texels = 0;  // masked pixels of a normal-map capture
   size_t images_checked = 0;
+  size_t variance_images_checked = 0;  // images[].variance headers checked
 };
 
 // Opens the mesh (or normal map and mask) and the header of every image: each must exist, be
-// readable, and have its camera's size. The first problem is returned, naming the file and field.
+// readable, and have its camera's size; a variance image must also be an OpenEXR file with
+// exactly the channels R, G and B. The first problem is returned, naming the file and field.
 Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report);
+
+// Reads capture.images[index].variance (which must be set) and checks it whole: an RGB image of
+// the camera's size whose every value is finite and >= 0 (CheckVarianceImage). Errors name
+// capture.json, the field and the file: NotFound / DataLoss from reading, InvalidArgument else.
+StatusOr<Image> ReadVarianceImage(const Capture& capture, size_t index);
+// The checks of ReadVarianceImage on an image already in memory: 3 channels, the camera's size,
+// every value finite and >= 0 (the first bad value and the count of bad ones are named).
+Status CheckVarianceImage(const Capture& capture, size_t index, const Image& variance);
 
 // Writes capture.json (full double precision), atomically.
 Status WriteCapture(const Capture& capture, const std::filesystem::path& json_path);

@@ -13,6 +13,7 @@ struct BrdfSample {
   float wo[3];      // unit, tangent frame, from the texel towards the camera
   float value[3];   // BRDF value per channel, 1/sr: radiance / irradiance
   float weight[3];  // per-channel weight: inverse variance of value from the noise model
+                    // or the photograph's images[].variance
                     // (relative weights are what matter); 0 means "ignore this channel"
   uint32_t image;   // index of the capture image the sample came from
 };

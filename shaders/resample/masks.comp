@@ -8,11 +8,20 @@
 //   light grazing -> light map (shadowed) -> footprint: every tap's camera-map texel is a hit
 //   within the edge depth tolerance of the texel, and lit -> pixel values (invalid, clipped,
 //   invalid below the noise, dark) -> the BRDF sample.
-// Loops: at most 4 taps x 3 channels per invocation, far below lavapipe's 65,535-step cut.
+// Loops: at most 4 taps x 3 channels (twice with a variance image) per invocation, far below
+// lavapipe's 65,535-step cut.
 //
 // Bindings (set 0): 0 = MaskParams, 3 = light map, 4 = camera map, 5 = MaskTexel[] (this chunk),
 // 6 = pixel rays (vec2 per pixel, pinhole cameras), 7 = photograph (float RGB, row-major),
-// 8 = outcome per texel (this chunk), 9 = MaskSample per texel (this chunk; written when kept).
+// 8 = outcome per texel (this chunk), 9 = MaskSample per texel (this chunk; written when kept),
+// 10 = the photograph's variance image (float RGB, row-major; read only when
+// params.relative_sigma_floor.y = 1, see "Noise" below).
+//
+// Noise: with the variance image, a sample's variance is MeasuredVariance (Σ w_k² var_k over the
+// bilinear taps) plus the relative floor, and its invalid / dark tests compare each channel with
+// kInvalidSigmas / kDarkSigmas (relative_sigma_floor.w / .z) of its own σ — the twins of
+// MeasuredVariance, MeasuredInvalid, MeasuredDark and MeasuredPixelVariance
+// (acquire/resample/image_resampler.h); without it, the noise model (params.noise) as before.
 // Push constants: MaskTexelPush {first_texel, count}. Specialization constant 0: local_size_x.
 #extension GL_GOOGLE_include_directive : require
 
@@ -29,6 +38,7 @@ layout(std430, set = 0, binding = 6) readonly buffer RayBuffer { vec2 pixel_rays
 layout(std430, set = 0, binding = 7) readonly buffer PixelBuffer { float pixels[]; };
 layout(std430, set = 0, binding = 8) writeonly buffer OutcomeBuffer { uint outcomes[]; };
 layout(std430, set = 0, binding = 9) writeonly buffer SampleBuffer { MaskSample samples[]; };
+layout(std430, set = 0, binding = 10) readonly buffer VarianceBuffer { float variances[]; };
 
 // The projection must be far inside int range before floor() is converted (as the CPU's).
 const float kMaxPixelCoordinate = 1e8;
@@ -127,6 +137,40 @@ vec3 PixelAt(int x, int y) {
 }
 
 bool AllFinite(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
+
+bool UseVarianceImage() { return params.relative_sigma_floor.y == 1.0; }
+
+vec3 VarianceAt(int x, int y) {
+  int i = 3 * (y * int(params.width) + x);
+  return vec3(variances[i], variances[i + 1], variances[i + 2]);
+}
+
+// Σ_k w_k² var_k over the taps of non-zero weight (image_resampler.h MeasuredVariance).
+vec3 MeasuredVariance(ivec2 tap[4], float w[4]) {
+  vec3 var = vec3(0.0);
+  for (int k = 0; k < 4; ++k) {
+    if (w[k] == 0.0) continue;
+    float w2 = w[k] * w[k];
+    var += w2 * VarianceAt(tap[k].x, tap[k].y);
+  }
+  return var;
+}
+
+// Some channel below -kInvalidSigmas of its own σ (MeasuredInvalid).
+bool MeasuredInvalid(vec3 value, vec3 var) {
+  for (int c = 0; c < 3; ++c) {
+    if (value[c] < -params.relative_sigma_floor.w * sqrt(var[c])) return true;
+  }
+  return false;
+}
+
+// Every channel at or below kDarkSigmas of its own σ (MeasuredDark).
+bool MeasuredDark(vec3 value, vec3 var) {
+  for (int c = 0; c < 3; ++c) {
+    if (!(value[c] <= params.relative_sigma_floor.z * sqrt(var[c]))) return false;
+  }
+  return true;
+}
 
 // Eigen's unitOrthogonal() for a 3-vector (float precision 1e-5), as the CPU's ToTangentFrame.
 vec3 UnitOrthogonal(vec3 v) {
@@ -255,13 +299,27 @@ void main() {
     value += w[k] * q;
   }
   float max_channel = max(value.x, max(value.y, value.z));
-  if (min(value.x, min(value.y, value.z)) < params.noise.w) {
-    outcomes[local] = kMaskInvalid;
-    return;
-  }
-  if (max_channel <= params.noise.z) {
-    outcomes[local] = kMaskDark;
-    return;
+  bool measured_noise = UseVarianceImage();
+  vec3 measured = vec3(0.0);
+  if (!measured_noise) {
+    if (min(value.x, min(value.y, value.z)) < params.noise.w) {
+      outcomes[local] = kMaskInvalid;
+      return;
+    }
+    if (max_channel <= params.noise.z) {
+      outcomes[local] = kMaskDark;
+      return;
+    }
+  } else {
+    measured = MeasuredVariance(tap, w);
+    if (MeasuredInvalid(value, measured)) {
+      outcomes[local] = kMaskInvalid;
+      return;
+    }
+    if (MeasuredDark(value, measured)) {
+      outcomes[local] = kMaskDark;
+      return;
+    }
   }
   // Tangent frame as the renderer builds it.
   vec3 tangent = tx.tangent.xyz;
@@ -283,9 +341,12 @@ void main() {
       s.weight[c] = 0.0;
       continue;
     }
-    // PixelVariance: > 0 because max_channel > dark floor >= 0 makes the relative floor positive.
-    float pixel_var = params.noise.x * max(value[c], 0.0) + params.noise.y +
-                      floor_sigma * floor_sigma;
+    // PixelVariance or MeasuredPixelVariance: > 0 because a sample that is not dark has
+    // max_channel > 0, which makes the relative floor positive.
+    float pixel_var = measured_noise
+                          ? measured[c] + floor_sigma * floor_sigma
+                          : params.noise.x * max(value[c], 0.0) + params.noise.y +
+                                floor_sigma * floor_sigma;
     s.value[c] = value[c] / scale;
     // weight = scale² / pixel_var, clamped to float's range (the CPU's 1 / variance clamp).
     float weight = (scale / pixel_var) * scale;

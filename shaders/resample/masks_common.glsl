@@ -5,7 +5,8 @@
 // (camera pass), 3 = light map (sampler2DArray of distances / scale), 4 = camera map
 // (sampler2DArray: distance, lit, hit), 5 = MaskTexel[], 6 = pixel rays (vec2 per photograph
 // pixel: undistorted normalised coordinates), 7 = photograph pixels (float RGB), 8 = outcomes,
-// 9 = MaskSample[]. A pass declares only what it reads (#define REFLCAP_MASK_* before including).
+// 9 = MaskSample[], 10 = the photograph's variance image (float RGB; masks.comp). A pass declares
+// only what it reads (#define REFLCAP_MASK_* before including).
 //
 // Light-map test (LightShadowed): the GLSL twin of the Vulkan renderer's InShadow
 // (shaders/render/shading.glsl explains the receiver-plane depth and the slope-scaled bias): p is

@@ -61,7 +61,8 @@ struct MaskParams {
   vec4 bias;                        // x: light-map bias, texel footprints; y: light-map plane
                                     // limit, footprints; z: camera-map bias, pixel footprints;
                                     // w: camera-map plane limit, pixel footprints
-  vec4 relative_sigma_floor;        // x: kRelativeSigmaFloor; yzw: unused
+  vec4 relative_sigma_floor;        // x: kRelativeSigmaFloor; y: 1 = binding 10 holds the
+                                    // variance image; z: kDarkSigmas; w: kInvalidSigmas
   uint flags;                       // kMaskFlag* bits
   uint width;                       // photograph size, pixels
   uint height;

@@ -25,6 +25,7 @@
 #include "engine/mesh/texel_atlas.h"
 #include "engine/texel/brdf_maps.h"
 #include "engine/texel/sample_store.h"
+#include "tests/acquire/resample/plane_scene.h"
 #include "tests/support/shapes.h"
 #include "tests/support/test_support.h"
 
@@ -430,44 +431,21 @@ TEST(ResampleSynth, CastShadowsAndVisibilityAgreeWithAnIndependentTruth) {
 
 // ---- Exact radiometry and pixel rejections on a plane ----------------------------------------
 
-// A camera at `eye` looking straight down -z (world = object frame): +x right, +y down in the
-// image means world +x and world -y.
-Camera DownCamera(const Vec3d& eye, int size, double f) {
-  Camera cam;
-  cam.id = "down";
-  cam.width = cam.height = size;
-  cam.K << f, 0, 0.5 * (size - 1), 0, f, 0.5 * (size - 1), 0, 0, 1;
-  Mat3d r;
-  r << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  cam.cam_from_world = {r, -(r * eye)};
-  return cam;
-}
-
 // Float evaluation against double expectations: a few ulps.
 constexpr double kFloatRelTolerance = 1e-5;
 
 TEST(ImageResampler, PlaneGivesExactValuesWeightsAndPixelRejections) {
   // A 0.2 m square at z = 0 seen from 0.5 m, one directional and one point light.
-  const TriangleMesh mesh = testing::MakeGridPlane(0.2f, 0.2f, 8, 8);
-  auto scene = RayScene::Create(mesh);
-  ASSERT_TRUE(scene.ok());
-  auto atlas = BuildTexelAtlas(mesh, 40, 40);
-  ASSERT_TRUE(atlas.ok());
-  Capture capture;
-  capture.json_path = "plane/capture.json";
-  capture.mesh = "plane.obj";
-  const Vec3d eye(0.01, -0.02, 0.5);
-  capture.cameras.push_back(DownCamera(eye, 64, 140));
-  Light sun;
-  sun.id = "sun";
-  sun.type = LightType::kDirectional;
-  sun.direction = Vec3d(0.3, 0.1, 1).normalized();
-  sun.intensity = Vec3d(1, 2, 0.5);
+  testing::PlaneScene plane = testing::MakePlaneScene();
+  const std::unique_ptr<RayScene>* scene = &plane.scene;
+  const TexelAtlas* atlas = &plane.atlas;
+  const Vec3d eye = plane.eye;
+  Capture& capture = plane.capture;
   Light bulb;
   bulb.id = "bulb";
   bulb.position = Vec3d(0.1, -0.05, 0.4);
   bulb.intensity = Vec3d(3, 3, 3);
-  capture.lights = {sun, bulb};
+  capture.lights.push_back(bulb);
   CaptureImage a;
   a.file = "a.exr";
   a.light = 0;
@@ -620,7 +598,7 @@ TEST(ImageResampler, RejectsWhatItCannotUse) {
   Capture capture;
   capture.json_path = "x/capture.json";
   capture.mesh = "plane.obj";
-  capture.cameras.push_back(DownCamera(Vec3d(0, 0, 0.5), 32, 80));
+  capture.cameras.push_back(testing::DownCamera(Vec3d(0, 0, 0.5), 32, 80));
   capture.lights.push_back(Light());
   CaptureImage image;
   image.file = "a.exr";
@@ -779,7 +757,7 @@ TEST(ResampleNormalMap, ValuesEqualTheBrdfWithoutAnyRay) {
   Capture capture;
   capture.json_path = dir / "capture.json";
   capture.normal_map = NormalMapGeometry{0, "normals.exr", "mask.png"};
-  Camera cam = DownCamera(Vec3d(0, 0, 1), size, 1);
+  Camera cam = testing::DownCamera(Vec3d(0, 0, 1), size, 1);
   cam.model = CameraModel::kOrthographic;
   cam.pixel_size_m = 0.001;
   capture.cameras.push_back(cam);

@@ -9,8 +9,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -24,6 +26,7 @@
 #include "engine/mesh/mesh_io.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
+#include "tests/acquire/resample/variance_capture.h"
 #include "tests/support/test_support.h"
 
 namespace reflcap::resample {
@@ -200,6 +203,121 @@ TEST_F(VulkanMasksTest, SamplesBothKeepHaveTheCpuValues) {
   EXPECT_LE(g.max_value_rel_diff, kValueTolerance);
   EXPECT_LE(g.max_weight_rel_diff, kWeightTolerance);
   EXPECT_LE(g.max_direction_diff, kDirectionTolerance);
+}
+
+// A variance image for photograph `pixels` (images[].variance): 1e-6 + (0.05 p)² per channel
+// (5 % noise with a floor), a hundred times that in the right half. It makes the dark pixels of
+// the shadowed and grazing parts dark by the variance (the noise-free capture's noise model calls
+// only values <= 0 dark) and halves the image's weights by 100: both paths must follow it.
+float TestVariance(const Image& pixels, int x, int y, int c) {
+  const float p = pixels.at(x, y, c);
+  const float var = 1e-6f + 0.0025f * p * p;
+  return x >= pixels.width / 2 ? 100 * var : var;
+}
+
+Image VarianceImageOf(const Image& pixels) {
+  Image variance(pixels.width, pixels.height, 3);
+  for (int y = 0; y < pixels.height; ++y) {
+    for (int x = 0; x < pixels.width; ++x) {
+      for (int c = 0; c < 3; ++c) variance.at(x, y, c) = TestVariance(pixels, x, y, c);
+    }
+  }
+  return variance;
+}
+
+// Pairs both paths carried to the pixel tests (kept, invalid, clipped or dark on both) that they
+// decided differently: float rounding may flip a value within ~1e-6 of its 3 σ or -5 σ
+// threshold (the GPU's bilinear weights come from a float projection), nothing else.
+constexpr double kMaxPixelTestFlipFraction = 1e-4;
+
+// With a variance image, masks.comp takes each sample's noise from it as the CPU does (the
+// twins MeasuredVariance, MeasuredInvalid, MeasuredDark, MeasuredPixelVariance): the same
+// outcomes, the pixel tests included, and the same weights.
+TEST_F(VulkanMasksTest, VarianceImageGivesTheCpuOutcomesAndWeights) {
+  const MaskCase& c = Compared();
+  auto cpu =
+      ImageResampler::Create(c.capture, c.atlas, c.scene.get(), NoiseModel(), kDefaultMinCos);
+  VulkanMaskOptions options;
+  options.device = TestDevice();
+  auto gpu = VulkanMasks::Create(c.capture, c.atlas, c.mesh, c.scene->SurfaceOffset(), NoiseModel(),
+                                 kDefaultMinCos, options);
+  ASSERT_TRUE(cpu.ok() && gpu.ok());
+  MaskAgreement agreement;
+  uint64_t dark_cpu = 0, dark_gpu = 0, dark_model = 0, pixel_tested = 0, pixel_flips = 0;
+  double max_weight_change = 0;  // largest |w_variance / w_model - 1| of the GPU's samples
+  auto pixel_test = [](uint8_t o) {
+    return o == uint8_t(Outcome::kKept) || o == uint8_t(Outcome::kDark) ||
+           o == uint8_t(Outcome::kInvalid) || o == uint8_t(Outcome::kClipped);
+  };
+  for (uint32_t i = 0; i < 8; ++i) {
+    const Image pixels = ReadImageRgb(c.capture.Resolve(c.capture.images[i].file)).value();
+    const Image variance = VarianceImageOf(pixels);
+    ImageOutput a, b, model;
+    CameraMapView map;
+    ASSERT_TRUE((*cpu)->Process(i, pixels, &a, &variance).ok());
+    const Status s = (*gpu)->Process(i, pixels, &b, &map, &variance);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    ASSERT_TRUE((*gpu)->Process(i, pixels, &model).ok());
+    agreement.Add(c.atlas.position, a.outcome, b.outcome, a.kept, b.kept, map);
+    for (size_t t = 0; t < a.outcome.size(); ++t) {
+      dark_cpu += a.outcome[t] == uint8_t(Outcome::kDark);
+      dark_gpu += b.outcome[t] == uint8_t(Outcome::kDark);
+      dark_model += model.outcome[t] == uint8_t(Outcome::kDark);
+      if (pixel_test(a.outcome[t]) && pixel_test(b.outcome[t])) {
+        ++pixel_tested;
+        pixel_flips += a.outcome[t] != b.outcome[t];
+      }
+    }
+    std::map<uint32_t, const BrdfSample*> by_texel;
+    for (const TexelSample& k : model.kept) by_texel[k.texel] = &k.sample;
+    for (const TexelSample& k : b.kept) {
+      auto it = by_texel.find(k.texel);
+      if (it == by_texel.end()) continue;
+      for (int ch = 0; ch < 3; ++ch) {
+        max_weight_change = std::max(
+            max_weight_change, std::abs(double(k.sample.weight[ch]) / it->second->weight[ch] - 1));
+      }
+    }
+  }
+  std::printf("with a variance image: agreeing %.4f %% of %llu pairs; kept by both %llu, max "
+              "relative difference value %.3g, weight %.3g; dark cpu %llu gpu %llu (noise model "
+              "%llu); pixel-test flips %llu of %llu\n",
+              100.0 * agreement.AgreeingFraction(), (unsigned long long)agreement.pairs,
+              (unsigned long long)agreement.kept_both, agreement.max_value_rel_diff,
+              agreement.max_weight_rel_diff, (unsigned long long)dark_cpu,
+              (unsigned long long)dark_gpu, (unsigned long long)dark_model,
+              (unsigned long long)pixel_flips, (unsigned long long)pixel_tested);
+  EXPECT_GE(agreement.AgreeingFraction(), kMinAgreement);
+  ASSERT_GT(agreement.kept_both, 1000u);
+  EXPECT_LE(agreement.max_value_rel_diff, kValueTolerance);
+  EXPECT_LE(agreement.max_weight_rel_diff, kWeightTolerance);
+  EXPECT_LE(double(pixel_flips), kMaxPixelTestFlipFraction * double(pixel_tested));
+  // Teeth: the variance image changed the GPU's pixel tests and weights, not just the CPU's.
+  EXPECT_GT(dark_gpu, dark_model + 100);
+  EXPECT_GT(max_weight_change, 0.5);
+}
+
+// The same through ResampleCapture (the variance read beside each photograph and bound for the
+// GPU), cross-checked against Embree on every photograph.
+TEST_F(VulkanMasksTest, ResampleWithVarianceImagesAgreesWithEmbree) {
+  const fs::path json =
+      testing::AddVarianceImages(CaptureDir(), "capture_variance.json", "variance", TestVariance);
+  testing::ScratchDir dir;
+  ResampleOptions options;
+  options.backend = Backend::kVulkan;
+  options.device = TestDevice();
+  options.cross_check = true;
+  options.use_variance = true;
+  auto summary = ResampleCapture(json, options, dir.path());
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  const Json report = Json::parse(summary->report_json);
+  EXPECT_EQ(report["backend"], "vulkan");
+  EXPECT_EQ(report["noise_model"]["variance_images"], report["images"]);
+  const Json& agreement = report["mask_agreement"];
+  EXPECT_GE(agreement["agreeing_fraction"].get<double>(), kMinAgreement);
+  EXPECT_GT(agreement["kept_by_both"].get<uint64_t>(), 1000u);
+  EXPECT_LE(agreement["max_weight_relative_difference"].get<double>(), kWeightTolerance);
+  EXPECT_LE(agreement["max_value_relative_difference"].get<double>(), kValueTolerance);
 }
 
 // The other light and camera kinds the synthetic rig does not use: a point light inside the

@@ -2,13 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <functional>
+#include <limits>
 
 #include <nlohmann/json.hpp>
 
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
+#include "tests/engine/capture/raw_exr.h"
 #include "tests/support/test_support.h"
 
 namespace reflcap {
@@ -243,6 +246,131 @@ TEST_F(CaptureFixture, MissingCaptureFileIsNotFound) {
   ASSERT_FALSE(c.ok());
   EXPECT_EQ(c.status().code(), StatusCode::kNotFound);
   EXPECT_NE(c.status().message().find("absent.json"), std::string::npos);
+}
+
+// ---- images[].variance ------------------------------------------------------------------------
+
+// The fixture with a valid variance image for images[1] (camera cam1, 8x6).
+class VarianceFixture : public CaptureFixture {
+ protected:
+  void SetUp() override {
+    CaptureFixture::SetUp();
+    fs::create_directories(dir_ / "variance");
+    ASSERT_TRUE(WriteExr(dir_ / "variance/1.exr", Image(8, 6, 3, 1e-4f)).ok());
+    json_["images"][1]["variance"] = "variance/1.exr";
+  }
+  // Reads the capture (files validated) and its variance image; the read's status.
+  Status ReadVariance() {
+    REFLCAP_RETURN_IF_ERROR(WriteAndValidate());
+    REFLCAP_ASSIGN_OR_RETURN(Capture c, ReadCapture(path()));
+    return ReadVarianceImage(c, 1).status();
+  }
+  // Expects ReadVariance to fail with exit code 2, naming the capture, the field, the file and
+  // every string in `needles`.
+  void ExpectReadError(const std::vector<std::string>& needles) {
+    const Status s = ReadVariance();
+    ASSERT_FALSE(s.ok()) << "expected an error mentioning " << needles[0];
+    EXPECT_EQ(ExitCodeFor(s), 2) << s.ToString();
+    for (const std::string& n : std::vector<std::string>{path().string(), "images[1].variance",
+                                                          "variance/1.exr"}) {
+      EXPECT_NE(s.message().find(n), std::string::npos) << s.message();
+    }
+    for (const auto& n : needles) EXPECT_NE(s.message().find(n), std::string::npos) << s.message();
+  }
+};
+
+TEST_F(VarianceFixture, IsReadCheckedAndWrittenBack) {
+  ASSERT_TRUE(WriteAndValidate().ok()) << WriteAndValidate().ToString();
+  auto c = ReadCapture(path());
+  ASSERT_TRUE(c.ok());
+  EXPECT_EQ(c->images[1].variance, "variance/1.exr");
+  EXPECT_TRUE(c->images[0].variance.empty());
+  CaptureFilesReport report;
+  ASSERT_TRUE(ValidateCaptureFiles(*c, &report).ok());
+  EXPECT_EQ(report.variance_images_checked, 1u);
+  auto variance = ReadVarianceImage(*c, 1);
+  ASSERT_TRUE(variance.ok()) << variance.status().ToString();
+  EXPECT_EQ(variance->width, 8);
+  EXPECT_FLOAT_EQ(variance->at(3, 2, 1), 1e-4f);
+  // Written back by the capture's writer, and only where given.
+  const Json written = Json::parse(CaptureToJson(*c));
+  EXPECT_EQ(written["images"][1]["variance"], "variance/1.exr");
+  EXPECT_FALSE(written["images"][0].contains("variance"));
+  EXPECT_FALSE(ReadVarianceImage(*c, 0).ok()) << "images[0] has none";
+}
+
+TEST_F(CaptureFixture, WithoutVarianceNothingChanges) {
+  ASSERT_TRUE(WriteAndValidate().ok());
+  auto c = ReadCapture(path());
+  ASSERT_TRUE(c.ok());
+  for (const CaptureImage& image : c->images) EXPECT_TRUE(image.variance.empty());
+  CaptureFilesReport report;
+  ASSERT_TRUE(ValidateCaptureFiles(*c, &report).ok());
+  EXPECT_EQ(report.variance_images_checked, 0u);
+  for (const Json& image : Json::parse(CaptureToJson(*c))["images"]) {
+    EXPECT_FALSE(image.contains("variance"));
+  }
+}
+
+TEST_F(VarianceFixture, BadFieldValuesAreNamed) {
+  json_["images"][1]["variance"] = 3;
+  ExpectError({"images[1].variance", "string"});
+  SetUp();
+  json_["images"][1]["variance"] = "";
+  ExpectError({"images[1].variance", "empty"});
+  SetUp();
+  json_["images"][1]["variance"] = "variance/1.png";
+  ExpectError({"images[1].variance", "OpenEXR"});
+  SetUp();
+  json_["images"][1]["variance"] = "images/1.exr";
+  ExpectError({"images[1].variance", "the photograph itself"});
+}
+
+TEST_F(VarianceFixture, MissingFileIsNamed) {
+  fs::remove(dir_ / "variance/1.exr");
+  ExpectError({"images[1].variance", "variance/1.exr", "cannot open"});
+  EXPECT_EQ(ExitCodeFor(WriteAndValidate()), 2);
+}
+
+TEST_F(VarianceFixture, WrongSizeIsNamed) {
+  ASSERT_TRUE(WriteExr(dir_ / "variance/1.exr", Image(8, 5, 3)).ok());
+  ExpectError({"images[1].variance", "variance/1.exr", "8x5", "cam1", "8x6"});
+}
+
+TEST_F(VarianceFixture, WrongChannelCountIsNamed) {
+  ASSERT_TRUE(WriteExr(dir_ / "variance/1.exr", Image(8, 6, 1)).ok());
+  ExpectError({"images[1].variance", "variance/1.exr", "1 channel (Y)", "R, G and B"});
+  ASSERT_TRUE(WriteExr(dir_ / "variance/1.exr", Image(8, 6, 4)).ok());
+  ExpectError({"images[1].variance", "4 channels (A, B, G, R)"});
+}
+
+TEST_F(VarianceFixture, CorruptFileIsNamed) {
+  testing::WriteText(dir_ / "variance/1.exr", "not an EXR");
+  ExpectError({"images[1].variance", "variance/1.exr"});
+}
+
+// The header is fine; the values are read and checked whole (a file from another program may
+// hold NaN, Inf or negative values).
+TEST_F(VarianceFixture, NonFiniteOrNegativeValuesAreNamed) {
+  Image v(8, 6, 3, 1e-4f);
+  v.at(5, 4, 1) = std::nanf("");
+  v.at(6, 4, 2) = std::nanf("");
+  testing::WriteRawExr(dir_ / "variance/1.exr", v);
+  ExpectReadError({"pixel (5, 4) channel G is NaN", "2 bad values", "finite and >= 0"});
+  v = Image(8, 6, 3, 1e-4f);
+  v.at(0, 1, 0) = -1e-6f;
+  testing::WriteRawExr(dir_ / "variance/1.exr", v);
+  ExpectReadError({"pixel (0, 1) channel R is negative"});
+  v.at(0, 1, 0) = std::numeric_limits<float>::infinity();
+  testing::WriteRawExr(dir_ / "variance/1.exr", v);
+  ExpectReadError({"pixel (0, 1) channel R is infinite"});
+  // The same checks on an image in memory (what the resampler applies to what it is given).
+  ASSERT_TRUE(WriteAndValidate().ok());
+  auto c = ReadCapture(path());
+  ASSERT_TRUE(c.ok());
+  const Status s = CheckVarianceImage(*c, 1, Image(8, 6, 1));
+  EXPECT_NE(s.message().find("expected 8x6 RGB"), std::string::npos) << s.message();
+  EXPECT_TRUE(CheckVarianceImage(*c, 1, Image(8, 6, 3, 0.0f)).ok()) << "zero variance is valid";
 }
 
 TEST(CaptureNormalMap, ValidatesNormalsAndMaskAgainstCamera) {
