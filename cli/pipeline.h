@@ -47,6 +47,7 @@ struct FitFlags {
   std::string lobe_model = "aniso", init = "seed", loss = "none", vulkan_kernel = "auto";
   int cluster_size = 0;
   bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
+  bool no_material_clusters = false;
   // The Vulkan fitter's kernel and cluster size (after Apply; its device comes from --device).
   fit::VulkanFitterOptions vulkan;
   void Register(ArgParser* args, fit::FitOptions* options);

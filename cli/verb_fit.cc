@@ -36,6 +36,11 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
                   "lobe transfer: largest relative albedo difference of a donor (default 0.15)");
   args->AddInt("lobe-transfer-rounds", &options->lobe_transfer.rounds,
                "lobe transfer: rounds; a borrowed lobe is lent on in the next (default 4)");
+  args->AddFlag("no-material-clusters", &no_material_clusters,
+                "do not cluster texels by albedo to lend the texels still without a lobe one "
+                "that the pooled samples of their material support");
+  args->AddInt("max-material-clusters", &options->clusters.max_clusters,
+               "material clusters: at most N (default 64)");
   args->AddDouble("highlight-cone", &options->highlight_cone_deg,
                   "a lobe is fitted only where some sample lies within DEG of the mirror "
                   "direction (default 5)");
@@ -75,6 +80,7 @@ Status FitFlags::Apply(fit::FitOptions* options) {
   REFLCAP_ASSIGN_OR_RETURN(options->loss, fit::ParseLossKind(loss));
   options->select_lobe_model = auto_model;
   options->lobe_transfer.enabled = !no_lobe_transfer;
+  options->clusters.enabled = !no_material_clusters;
   options->albedo_fill.enabled = !no_albedo_fill;
   options->channel_retry = !no_channel_retry;
   return OkStatus();
@@ -154,6 +160,13 @@ int RunFit(int argc, char** argv) {
     }
   }
   std::printf("\n");
+  if (options.lobes > 0) {
+    std::printf("  lobes lent: %zu by neighbours; material clusters %d (%d with a lobe): %zu lent, "
+                "%zu replaced a texel's own\n",
+                summary->lobes_transferred, summary->material_clusters,
+                summary->material_clusters_with_lobe, summary->cluster_lobes_lent,
+                summary->cluster_lobes_replaced);
+  }
   return 0;
 }
 

@@ -136,7 +136,7 @@ std::string PipelineSummaryLine(const PipelineSummary& s) {
                 s.validation.noise_bound_psnr_db
                     ? StrCat(" (noise bound ", FormatDb(s.validation.noise_bound_psnr_db), ")")
                     : std::string(),
-                ", rel. RMSE ",
+                ", PSNR-L ", FormatDb(s.validation.psnr_l_db), ", rel. RMSE ",
                 s.validation.rel_rmse ? StrCat(std::round(*s.validation.rel_rmse * 1e4) / 1e4)
                                       : std::string("n/a"),
                 "; resample ", FormatDuration(s.resample_s), ", fit ", FormatDuration(s.fit_s),

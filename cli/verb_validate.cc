@@ -89,10 +89,13 @@ int RunValidate(int argc, char** argv) {
   const validate::ValidateSummary& r = *summary;
   std::printf("validated %zu %s images (%zu pixels) in %s\n", r.images,
               render::SplitSelectionName(*selection), r.pixels, FormatDuration(r.seconds).c_str());
-  std::printf("  raw        PSNR %s  rel. RMSE %s  SSIM %s\n", Db(r.psnr_db).c_str(),
-              Num(r.rel_rmse).c_str(), Num(r.ssim).c_str());
-  std::printf("  LS-scaled  PSNR %s  rel. RMSE %s  SSIM %s  (per-channel least-squares scale)\n",
-              Db(r.scaled_psnr_db).c_str(), Num(r.scaled_rel_rmse).c_str(), Num(r.scaled_ssim).c_str());
+  std::printf("  raw        PSNR %s  PSNR-L %s  rel. RMSE %s  SSIM %s\n", Db(r.psnr_db).c_str(),
+              Db(r.psnr_l_db).c_str(), Num(r.rel_rmse).c_str(), Num(r.ssim).c_str());
+  std::printf("  LS-scaled  PSNR %s  PSNR-L %s  rel. RMSE %s  SSIM %s  (per-channel least-squares "
+              "scale)\n", Db(r.scaled_psnr_db).c_str(), Db(r.scaled_psnr_l_db).c_str(),
+              Num(r.scaled_rel_rmse).c_str(), Num(r.scaled_ssim).c_str());
+  std::printf("  worst 0.1 %% of pixels carry %s of the squared error (worst 1 %%: %s)\n",
+              Num(r.worst_0_1pct_error_share).c_str(), Num(r.worst_1pct_error_share).c_str());
   if (r.noise_bound_psnr_db) {
     std::printf("  noise bound PSNR %s (what a perfect re-render scores under the capture's noise "
                 "model); raw PSNR is %+.2f dB from it\n",

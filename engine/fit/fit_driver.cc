@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <future>
 #include <optional>
 #include <utility>
@@ -20,6 +21,7 @@
 #include "engine/core/progress.h"
 #include "engine/fit/albedo_fill.h"
 #include "engine/fit/lobe_transfer.h"
+#include "engine/fit/material_clusters.h"
 #include "engine/fit/problem.h"
 #include "engine/image/exr_io.h"
 #include "engine/texel/brdf_maps.h"
@@ -86,16 +88,19 @@ void ReleaseFreeHeap() {
 }  // namespace
 
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
-                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled) {
+                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled,
+                    const std::vector<int32_t>& cluster_of) {
   REFLCAP_CHECK(fits->size() == atlas.TexelCount());
   REFLCAP_CHECK(sigma->lobes() == fits->lobes());
   REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits->size());
+  REFLCAP_CHECK(cluster_of.empty() || cluster_of.size() == fits->size());
   {
-    constexpr int kStatusChannels = 5;
+    constexpr int kStatusChannels = 6;
     Image status(atlas.width, atlas.height, kStatusChannels, 0.0f);
     for (size_t p = 0; p < status.PixelCount(); ++p) {
       status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
       status.data[kStatusChannels * p + 3] = -1;
+      status.data[kStatusChannels * p + 5] = -1;
     }
     for (size_t t = 0; t < fits->size(); ++t) {
       float* px = &status.data[kStatusChannels * size_t(atlas.pixel_of_texel[t])];
@@ -105,9 +110,11 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
       // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
       px[3] = float(fits->donor(t));
       px[4] = albedo_filled.empty() ? 0.0f : float(albedo_filled[t]);
+      px[5] = cluster_of.empty() ? -1.0f : float(cluster_of[t]);
     }
-    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(
-        dir / "status.exr", status, {"status", "iterations", "cost", "lobe_donor", "albedo_filled"}));
+    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "status.exr", status,
+                                             {"status", "iterations", "cost", "lobe_donor",
+                                              "albedo_filled", "material_cluster"}));
   }
   const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
   const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
@@ -126,9 +133,11 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   REFLCAP_RETURN_IF_ERROR(sigma->ReadAll([&](size_t t, const float* in) {
     float* px = &sigmas.data[size_t(atlas.pixel_of_texel[t]) * n];
     PutTexel(channel, in, px);
-    // Lobe transfer re-fitted the albedo of a texel with a donor: re-fitted, not measured.
-    if (fits->donor(t) >= 0) {
-      for (int c = 0; c < brdf::kChannels; ++c) px[c] = -1;
+    // Lobe transfer re-fitted the albedo of a texel with a donor: re-fitted, not measured. A
+    // cluster lobe replaced whatever lobe the texel fitted: none of its own sigmas apply.
+    if (fits->borrowed(t)) {
+      const int unknown = fits->donor(t) == FitStore::kClusterLobe ? n : brdf::kChannels;
+      for (int c = 0; c < unknown; ++c) px[c] = -1;
     }
   }));
   return WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat);
@@ -202,7 +211,8 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   // in up to `rounds` passes: re-reading and checking the store for each took 8.3 of the
   // transfer's 11.9 s on the million preset (2 cores). Kept while their decoded size stays within
   // SampleCacheBudget(); the others are read again.
-  const bool keep_chunks = options.lobe_transfer.enabled && options.lobes > 0;
+  const bool keep_chunks =
+      (options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0;
   const uint64_t cache_budget = keep_chunks ? SampleCacheBudget() : 0;
   uint64_t cached_bytes = 0;
   std::vector<std::optional<TexelSampleChunk>> cached(info.chunks);
@@ -269,6 +279,45 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const auto transfer_start = std::chrono::steady_clock::now();
   LobeTransferStats transfer;
   double transfer_read_seconds = 0, transfer_test_seconds = 0;  // waiting for chunks; testing
+  // Calls visit(chunk) for every chunk c with wanted(first texel, end) true, in ascending order:
+  // kept chunks from memory, the others read, the next while one is visited (as the fit pass
+  // prefetches).
+  const auto visit_chunks = [&](const std::function<bool(uint64_t, uint64_t)>& wanted_range,
+                                const std::function<void(const TexelSampleChunk&)>& visit) -> Status {
+    std::vector<uint32_t> wanted;
+    for (uint32_t c = 0; c < info.chunks; ++c) {
+      const uint64_t first = uint64_t(c) * info.chunk_texels;
+      const uint64_t end = std::min<uint64_t>(first + info.chunk_texels, info.texels);
+      if (wanted_range(first, end)) wanted.push_back(c);
+    }
+    std::vector<uint32_t> to_read;
+    for (uint32_t c : wanted) {
+      if (!cached[c].has_value()) to_read.push_back(c);
+    }
+    std::future<StatusOr<TexelSampleChunk>> pending;
+    size_t next_read = 0;
+    if (next_read < to_read.size()) pending = std::async(std::launch::async, read, to_read[next_read]);
+    for (uint32_t c : wanted) {
+      StatusOr<TexelSampleChunk> loaded = UnavailableError("not read");
+      const TexelSampleChunk* chunk = nullptr;
+      if (cached[c].has_value()) {
+        chunk = &*cached[c];
+      } else {
+        const auto wait_start = std::chrono::steady_clock::now();
+        loaded = pending.get();
+        transfer_read_seconds += Seconds(wait_start);
+        if (!loaded.ok()) return loaded.status();
+        if (++next_read < to_read.size()) {
+          pending = std::async(std::launch::async, read, to_read[next_read]);
+        }
+        chunk = &*loaded;
+      }
+      const auto test_start = std::chrono::steady_clock::now();
+      visit(*chunk);
+      transfer_test_seconds += Seconds(test_start);
+    }
+    return OkStatus();
+  };
   if (options.lobe_transfer.enabled && options.lobes > 0) {
     // round >= 1: the texels that borrowed in the last round (one byte per texel).
     std::vector<uint8_t> lenders;
@@ -282,42 +331,13 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       }
       if (round_stats.no_donor == round_stats.recipients) break;  // no candidate anywhere
       lenders.assign(info.texels, 0);
-      // Chunks hold consecutive texels: only those with a recipient that has candidates are
-      // read, the next one while the current one is tested (as the fit pass prefetches).
-      std::vector<uint32_t> wanted;
-      for (uint32_t c = 0; c < info.chunks; ++c) {
-        const uint64_t first = uint64_t(c) * info.chunk_texels;
-        const uint64_t end = std::min<uint64_t>(first + info.chunk_texels, info.texels);
-        if (candidates.AnyIn(first, end)) wanted.push_back(c);
-      }
-      // Kept chunks are tested from memory; the others are read, the next while one is tested.
-      std::vector<uint32_t> to_read;
-      for (uint32_t c : wanted) {
-        if (!cached[c].has_value()) to_read.push_back(c);
-      }
-      std::future<StatusOr<TexelSampleChunk>> pending;
-      size_t next_read = 0;
-      if (next_read < to_read.size()) pending = std::async(std::launch::async, read, to_read[next_read]);
-      for (uint32_t c : wanted) {
-        StatusOr<TexelSampleChunk> loaded = UnavailableError("not read");
-        const TexelSampleChunk* chunk = nullptr;
-        if (cached[c].has_value()) {
-          chunk = &*cached[c];
-        } else {
-          const auto wait_start = std::chrono::steady_clock::now();
-          loaded = pending.get();
-          transfer_read_seconds += Seconds(wait_start);
-          if (!loaded.ok()) return loaded.status();
-          if (++next_read < to_read.size()) {
-            pending = std::async(std::launch::async, read, to_read[next_read]);
-          }
-          chunk = &*loaded;
-        }
-        const auto test_start = std::chrono::steady_clock::now();
-        ApplyLobeTransfer(*chunk, candidates, options.lobe_transfer, options.min_cos_theta,
-                          options.threads, &fits, &round_stats, &lenders);
-        transfer_test_seconds += Seconds(test_start);
-      }
+      // Chunks hold consecutive texels: only those with a recipient that has candidates.
+      REFLCAP_RETURN_IF_ERROR(visit_chunks(
+          [&](uint64_t first, uint64_t end) { return candidates.AnyIn(first, end); },
+          [&](const TexelSampleChunk& chunk) {
+            ApplyLobeTransfer(chunk, candidates, options.lobe_transfer, options.min_cos_theta,
+                              options.threads, &fits, &round_stats, &lenders);
+          }));
       if (round == 0) transfer.rejected = round_stats.rejected;
       transfer.transferred += round_stats.transferred;
       ++transfer.rounds;
@@ -325,6 +345,27 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     }
   }
   const double transfer_seconds = Seconds(transfer_start);
+  const double transfer_chunk_read_seconds = transfer_read_seconds;
+  const double transfer_chunk_test_seconds = transfer_test_seconds;
+  // Material clusters (material_clusters.h): the texels still without a lobe take one that the
+  // pooled samples of their material support.
+  const auto cluster_start = std::chrono::steady_clock::now();
+  MaterialClusterStats cluster_stats;
+  MaterialClusters clusters = BuildMaterialClusters(fits, options.clusters, &cluster_stats);
+  if (clusters.count > 0) {
+    REFLCAP_RETURN_IF_ERROR(visit_chunks(
+        [&](uint64_t first, uint64_t end) { return clusters.PoolIn(first, end); },
+        [&](const TexelSampleChunk& chunk) {
+          StashClusterSamples(chunk, options.min_cos_theta, &clusters);
+        }));
+    ChooseClusterLobes(options, &clusters, &cluster_stats);
+    REFLCAP_RETURN_IF_ERROR(visit_chunks(
+        [&](uint64_t first, uint64_t end) { return clusters.KeptIn(first, end); },
+        [&](const TexelSampleChunk& chunk) {
+          ApplyClusterLobes(chunk, clusters, options, &fits, &cluster_stats);
+        }));
+  }
+  const double cluster_seconds = Seconds(cluster_start);
   cached = {};  // the kept chunks are not needed past the transfer
 
   // Albedo fill (albedo_fill.h): texels no train photograph lit and saw.
@@ -335,7 +376,9 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
 
   const auto write_start = std::chrono::steady_clock::now();
   ReleaseFreeHeap();
-  REFLCAP_RETURN_IF_ERROR(WriteFitMaps(staging.path(), atlas, &fits, sigma.get(), albedo_filled));
+  REFLCAP_RETURN_IF_ERROR(
+      WriteFitMaps(staging.path(), atlas, &fits, sigma.get(), albedo_filled, clusters.cluster_of));
+  clusters = MaterialClusters();
   albedo_filled = std::vector<uint8_t>();
   REFLCAP_RETURN_IF_ERROR(sigma->Remove());
 
@@ -357,6 +400,11 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   }
   summary.texels = info.texels;
   summary.fit_seconds = fit_seconds;
+  summary.lobes_transferred = transfer.transferred;
+  summary.material_clusters = cluster_stats.clusters;
+  summary.material_clusters_with_lobe = cluster_stats.clusters_with_lobe;
+  summary.cluster_lobes_lent = cluster_stats.transferred;
+  summary.cluster_lobes_replaced = cluster_stats.replaced;
   const double fits_count = double(info.texels) * ProblemsPerTexel(options.lobe_model);
   summary.fits_per_second = fit_seconds > 0 ? fits_count / fit_seconds : 0;
 
@@ -387,6 +435,14 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
           {"albedo_tolerance", options.lobe_transfer.albedo_tolerance},
           {"max_cost_increase", options.lobe_transfer.max_cost_increase},
           {"rounds", options.lobe_transfer.rounds}}},
+        {"clusters",
+         {{"enabled", options.clusters.enabled},
+          {"chroma_scale", options.clusters.chroma_scale},
+          {"level_scale", options.clusters.level_scale},
+          {"max_clusters", options.clusters.max_clusters},
+          {"min_cluster_texels", options.clusters.min_cluster_texels},
+          {"pool_texels", options.clusters.pool_texels},
+          {"lobes_per_cluster", options.clusters.lobes_per_cluster}}},
         {"albedo_fill",
          {{"enabled", options.albedo_fill.enabled},
           {"radius", options.albedo_fill.radius},
@@ -405,6 +461,16 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"rejected", transfer.rejected},
         {"transferred", transfer.transferred},
         {"rounds", transfer.rounds}}},
+      {"clusters",
+       {{"clusters", cluster_stats.clusters},
+        {"clusters_with_lobe", cluster_stats.clusters_with_lobe},
+        {"refined", cluster_stats.refined},
+        {"clustered_texels", cluster_stats.clustered_texels},
+        {"recipients", cluster_stats.recipients},
+        {"no_lobe", cluster_stats.no_lobe},
+        {"rejected", cluster_stats.rejected},
+        {"transferred", cluster_stats.transferred},
+        {"replaced", cluster_stats.replaced}}},
       {"albedo_fill", {{"unseen", fill.unseen}, {"filled", fill.filled}, {"rounds", fill.rounds}}},
       {"cost_percentiles", Percentiles(std::move(costs))},
       {"reduced_chi2_percentiles", Percentiles(std::move(chi2))},
@@ -434,8 +500,9 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   report["timings_s"] = {{"read_wait", read_seconds},
                          {"fit", fit_seconds},
                          {"lobe_transfer", transfer_seconds},
-                         {"lobe_transfer_read_wait", transfer_read_seconds},
-                         {"lobe_transfer_test", transfer_test_seconds},
+                         {"lobe_transfer_read_wait", transfer_chunk_read_seconds},
+                         {"lobe_transfer_test", transfer_chunk_test_seconds},
+                         {"clusters", cluster_seconds},
                          {"lobe_transfer_kept_mib", double(cached_bytes) / (1 << 20)},
                          {"albedo_fill", fill_seconds},
                          {"write_maps", write_seconds_so_far},

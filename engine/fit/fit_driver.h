@@ -9,7 +9,8 @@
 //   FIT/sigma.exr        the same channels, each parameter's standard deviation (-1 = unknown)
 //   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
 //                        `iterations`, `cost` (final 1/2 sum rho(r^2)) and `lobe_donor` (the
-//                        texel whose lobes it borrowed by lobe transfer, -1 for none)
+//                        texel whose lobes it borrowed by lobe transfer or from its material
+//                        cluster, -1 for none), `albedo_filled` and `material_cluster`
 //   FIT/fit_report.json  backend, device, options, texels, counts per status, cost and reduced
 //                        chi^2 percentiles, iterations, fits_per_second, timings
 // The folder is staged and moved into place only when complete (StagingDir).
@@ -33,6 +34,11 @@ struct FitRunSummary {
   double total_seconds = 0;
   double fits_per_second = 0;  // problems (channel fits for aniso/iso, texels for shared) per s
   std::string device;
+  size_t lobes_transferred = 0;   // lobe transfer: texels that took a neighbour's lobe
+  int material_clusters = 0;      // material clusters formed, and those that kept a lobe
+  int material_clusters_with_lobe = 0;
+  size_t cluster_lobes_lent = 0;      // Lambert-only texels that took their cluster's lobe
+  size_t cluster_lobes_replaced = 0;  // texels whose own or borrowed lobe gave way to it
 };
 
 // Reads SAMPLES, fits with `backend`, writes FIT (refused when it exists non-empty, unless
@@ -53,8 +59,11 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
 // BrdfParams copy). A texel with a lobe donor gets albedo sigmas -1 (re-fitted, not measured).
 // Releases the store's parameters once their map is built (FitStore::ReleaseParams): afterwards
 // only its scalars remain. `albedo_filled` (one byte per texel, or empty for none) marks the
-// texels albedo_fill.h filled: status.exr's `albedo_filled` channel (1 = filled).
+// texels albedo_fill.h filled: status.exr's `albedo_filled` channel (1 = filled). `cluster_of`
+// (one per texel, or empty for none) is the `material_cluster` channel (material_clusters.h; -1 =
+// no cluster).
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, FitStore* fits,
-                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled = {});
+                    SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled = {},
+                    const std::vector<int32_t>& cluster_of = {});
 
 }  // namespace reflcap::fit

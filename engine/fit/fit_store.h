@@ -31,6 +31,8 @@ namespace reflcap::fit {
 // Texels may be written concurrently from several threads when each thread writes other texels.
 class FitStore {
  public:
+  static constexpr int64_t kNoDonor = -1;
+  static constexpr int64_t kClusterLobe = -2;
   // Donor indices are int32: at most this many texels (an atlas of 2^31 texels would need far
   // more memory than any machine this runs on; the status map holds donors exactly only below
   // 2^24 anyway).
@@ -60,8 +62,11 @@ class FitStore {
   int residuals(size_t t) const { return residuals_[t]; }
   int iterations(size_t t) const { return iterations_[t]; }
   float cost(size_t t) const { return cost_[t]; }
-  // The texel whose lobes texel t borrowed by lobe transfer (lobe_transfer.h), -1 for none.
+  // The texel whose lobes texel t borrowed by lobe transfer (lobe_transfer.h), kNoDonor (-1)
+  // for none, kClusterLobe (-2) for a lobe of its material cluster (material_clusters.h).
   int64_t donor(size_t t) const { return donor_[t]; }
+  // True when texel t's lobes are borrowed (from a neighbour or its cluster), not measured.
+  bool borrowed(size_t t) const { return donor_[t] != kNoDonor; }
   void set_donor(size_t t, int64_t donor);
 
   // Frees the parameters (params(), Get()) once their map is built; the scalars stay.

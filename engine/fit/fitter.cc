@@ -80,6 +80,7 @@ StatusOr<LossKind> ParseLossKind(const std::string& name) {
 Status FitOptions::Validate() const {
   REFLCAP_RETURN_IF_ERROR((ProblemLayout{lobe_model, lobes}.Validate()));
   REFLCAP_RETURN_IF_ERROR(lobe_transfer.Validate());
+  REFLCAP_RETURN_IF_ERROR(clusters.Validate());
   REFLCAP_RETURN_IF_ERROR(albedo_fill.Validate());
   if (!(loss_scale > 0) || !std::isfinite(loss_scale)) {
     return InvalidArgumentError("--loss-scale: must be positive, got ", loss_scale);

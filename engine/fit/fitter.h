@@ -94,6 +94,31 @@ struct LobeTransferOptions {
   Status Validate() const;
 };
 
+// Material clusters (engine/fit/material_clusters.h): after lobe transfer, the texels still
+// without a lobe take one their material's pooled samples support. Applied by RunFit.
+struct MaterialClusterOptions {
+  bool enabled = true;
+  // Albedo-space units (material_clusters.h step 1). Chromaticity 0.02: the synth's and
+  // Suzanne's texture modulation of one material stays within a unit or two, distinct pigments
+  // differ by several. Level 0.1 in ln(sum rho): a 10 % brightness step.
+  double chroma_scale = 0.02;
+  double level_scale = 0.1;
+  // At most this many clusters (64: far more materials than an object shows; each costs a pooled
+  // test of kClusterLobeCandidates lobes on up to pool_texels texels).
+  int max_clusters = 64;
+  // A split must leave both halves at least this many texels: fewer cannot tell a material from
+  // a few badly fitted texels.
+  int min_cluster_texels = 16;
+  // Evidenced texels per cluster whose samples test the candidate lobes (an even stride through
+  // the cluster): 256 texels of ~20-100 samples decide a lobe's few parameters many times over.
+  int pool_texels = 256;
+  // Lobes a cluster offers each recipient (best pooled cost first): a material whose lobe
+  // varies (texture in the specular layer) is covered by a few.
+  int lobes_per_cluster = 3;
+
+  Status Validate() const;
+};
+
 // Albedo fill (engine/fit/albedo_fill.h): after the fit, a texel with no valid sample (no train
 // photograph lit and saw it) takes the mean albedo of the texels around it that have one, so a
 // held-out view that lights it shows the surrounding material instead of black. Applied by
@@ -172,6 +197,7 @@ struct FitOptions {
   // Worker threads (0 = all hardware threads).
   int threads = 0;
   LobeTransferOptions lobe_transfer;
+  MaterialClusterOptions clusters;
   AlbedoFillOptions albedo_fill;
 
   Status Validate() const;

@@ -59,13 +59,9 @@ bool IsRecipient(const FitStore& fits, size_t t) {
          fits.donor(t) < 0;
 }
 
-// One sample of a recipient, as the fit used it: unit directions, both above min_cos.
-struct UsableSample {
-  float wi[3], wo[3];
-  bool usable = false;
-};
+}  // namespace
 
-UsableSample Prepare(const BrdfSample& s, double min_cos_theta) {
+UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta) {
   UsableSample u;
   double ni = 0, no = 0;
   for (int j = 0; j < 3; ++j) {
@@ -130,7 +126,6 @@ double LobeSupremum(const brdf::BrdfParams& p, int c) {
   return sum;
 }
 
-}  // namespace
 
 std::vector<uint32_t> LobeCandidates::Of(uint32_t t) const {
   const auto it = std::lower_bound(recipients.begin(), recipients.end(), t);
@@ -236,7 +231,7 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
       const size_t count = chunk.SampleCount(i);
       const BrdfSample* samples = chunk.SamplesOf(i);
       usable.resize(count);
-      for (size_t k = 0; k < count; ++k) usable[k] = Prepare(samples[k], min_cos_theta);
+      for (size_t k = 0; k < count; ++k) usable[k] = PrepareUsableSample(samples[k], min_cos_theta);
       std::array<float, brdf::kChannels> rho{};
       const double lambert_cost = RefitAlbedoCost(samples, count, usable.data(), nullptr, &rho);
       // The evidence bound of the texel's own fit (problem.h kMaxLobeSupremum): a lobe may rise

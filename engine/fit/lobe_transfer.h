@@ -33,9 +33,11 @@
 // sample near its mirror direction and showed no lobe there is "lobe absent" (kConverged,
 // Lambert-only), never a recipient. The transferred texel keeps its status (the lobe is
 // borrowed, not measured), its lobe sigmas stay -1 (unknown), and the FIT maps record the donor.
+#include <array>
 #include <cstdint>
 #include <vector>
 
+#include "engine/brdf/lafortune.h"
 #include "engine/core/status.h"
 #include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
@@ -76,6 +78,24 @@ struct LobeCandidates {
   // True when some texel in [first, end) has candidates.
   bool AnyIn(uint64_t first, uint64_t end) const;
 };
+
+// Shared with material clusters (material_clusters.h) ------------------------------------------
+
+// One sample as the fit used it: unit directions; usable when both are above min_cos_theta (and
+// finite, and not a zeroed record: problem.h kMinDirectionNorm).
+struct UsableSample {
+  float wi[3], wo[3];
+  bool usable = false;
+};
+UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta);
+
+// Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null),
+// written to `rho`, and the summed cost 1/2 sum w r^2 over the usable samples.
+double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
+                       const brdf::BrdfParams* params, std::array<float, brdf::kChannels>* rho);
+
+// The largest value the lobes of `p` reach in channel c over the hemisphere.
+double LobeSupremum(const brdf::BrdfParams& p, int c);
 
 // Phase 1: for every recipient in `fits`, its candidate donors. fits.donor(t) >= 0 marks a texel
 // that borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.

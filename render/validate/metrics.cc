@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 
 #include <nlohmann/json.hpp>
 
@@ -151,6 +152,8 @@ void ErrorSums::Add(const ErrorSums& o) {
   photo_sq += o.photo_sq;
   noise_var_over_peak2 += o.noise_var_over_peak2;
   ssim_sum += o.ssim_sum;
+  ldr_values += o.ldr_values;
+  sse_ldr += o.sse_ldr;
 }
 
 std::optional<double> ErrorSums::PsnrDb() const {
@@ -173,6 +176,56 @@ std::optional<double> ErrorSums::Ssim() const {
 std::optional<double> ErrorSums::NoiseBoundDb() const {
   if (!(values > 0)) return std::nullopt;
   return CappedDb(noise_var_over_peak2 / values);
+}
+
+std::optional<double> ErrorSums::PsnrLDb() const {
+  if (!(ldr_values > 0)) return std::nullopt;
+  return CappedDb(sse_ldr / ldr_values);
+}
+
+float SrgbEncode(float x) {
+  if (x <= 0.0031308f) return 12.92f * x;
+  return 1.055f * std::pow(x, 1 / 2.4f) - 0.055f;
+}
+
+float LdrValue(double x, double inv_white) {
+  const double y = x * inv_white;
+  if (!(y > 0)) return 0;  // also NaN
+  if (!(y < 1)) return 1;
+  return SrgbEncode(float(y));
+}
+
+std::optional<float> NearestRankPercentile(std::vector<float>* values, double fraction) {
+  if (values->empty()) return std::nullopt;
+  const size_t m = values->size();
+  // Rank ceil(fraction m) (1-based), in [1, m]. The factor (1 - 1e-12) keeps a product that is an
+  // integer in exact arithmetic (0.99 · 100) but rounds up by an ulp from taking the next rank;
+  // otherwise 0.99 m is at least 0.01 from an integer, far more than the shift (1e-12 m).
+  const double product = fraction * double(m) * (1 - 1e-12);
+  const size_t rank = std::clamp<size_t>(size_t(std::ceil(product)), 1, m);
+  auto nth = values->begin() + std::ptrdiff_t(rank - 1);
+  std::nth_element(values->begin(), nth, values->end());
+  return *nth;
+}
+
+std::array<std::optional<double>, kWorstShareCount> WorstErrorShares(std::vector<float>* errors) {
+  std::array<std::optional<double>, kWorstShareCount> shares;
+  const size_t n = errors->size();
+  double total = 0;
+  for (float e : *errors) total += e;
+  if (n == 0 || !(total > 0) || !std::isfinite(total)) return shares;
+  // Largest first: the largest fraction partitions everything, each smaller one only its prefix.
+  size_t end = n;
+  for (int k = kWorstShareCount - 1; k >= 0; --k) {
+    const size_t count = (n * size_t(kWorstPerMille[k]) + 999) / 1000;  // ceil, >= 1
+    std::nth_element(errors->begin(), errors->begin() + std::ptrdiff_t(count - 1),
+                     errors->begin() + std::ptrdiff_t(end), std::greater<float>());
+    double worst = 0;
+    for (size_t i = 0; i < count; ++i) worst += (*errors)[i];
+    shares[size_t(k)] = std::min(1.0, worst / total);
+    end = count;
+  }
+  return shares;
 }
 
 Image EvaluationMask(const Image& geometric_mask, const Image& photo, double saturation,
@@ -371,16 +424,33 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
   const double p2 = peak > 0 ? peak * peak : 1.0;
   const double inv_mean = mean > 0 ? 1 / mean : 1.0;
   for (int c = 0; c < 3; ++c) score.scale[c] = rr[c] > 0 ? pr[c] / rr[c] : 1.0;
+  {
+    std::vector<float> values;
+    values.reserve(pixels.size() * 3);
+    for (size_t i : pixels) values.insert(values.end(), &photo.data[i * 3], &photo.data[i * 3 + 3]);
+    const std::optional<float> q = NearestRankPercentile(&values, kLdrWhitePercentile);
+    if (q && *q > 0 && std::isfinite(*q)) score.q99 = *q;
+  }
+  const double inv_white = score.q99 ? 1 / *score.q99 : 0.0;
+  const double ldr_values = score.q99 ? 3 : 0;
 
   std::vector<uint8_t> bits;
   if (aux) {
     bits = LabelRegions(*aux, eval_mask, options);
     score.has_regions = true;
   }
+  score.pixel_errors.reserve(pixels.size());
+  // Worst pixels: a heap of at most kWorstPixelsListed whose top is the least bad kept.
+  auto worse = [](const WorstPixel& a, const WorstPixel& b) {
+    if (a.error_over_peak2 != b.error_over_peak2) return a.error_over_peak2 > b.error_over_peak2;
+    return a.y != b.y ? a.y < b.y : a.x < b.x;
+  };
+  std::vector<WorstPixel>& worst = score.worst_pixels;
   for (size_t i : pixels) {
     ErrorSums raw_px, scaled_px;
     raw_px.pixels = scaled_px.pixels = 1;
     raw_px.values = scaled_px.values = 3;
+    raw_px.ldr_values = scaled_px.ldr_values = ldr_values;
     for (int c = 0; c < 3; ++c) {
       const double p = photo.data[i * 3 + c], r = render.data[i * 3 + c];
       const double e = r - p, es = score.scale[c] * r - p;
@@ -391,6 +461,13 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
       scaled_px.sse_over_peak2 += es * es / p2;
       scaled_px.photo_sq += p * p;
       if (noise) raw_px.noise_var_over_peak2 += noise->Variance(r) / p2;
+      if (score.q99) {
+        const double lp = LdrValue(p, inv_white);
+        const double el = LdrValue(r, inv_white) - lp;
+        const double els = LdrValue(score.scale[c] * r, inv_white) - lp;
+        raw_px.sse_ldr += el * el;
+        scaled_px.sse_ldr += els * els;
+      }
     }
     score.raw.Add(raw_px);
     score.scaled.Add(scaled_px);
@@ -399,7 +476,32 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
         if (bits[i] & (1u << k)) score.regions[k].Add(raw_px);
       }
     }
+    score.pixel_errors.push_back(float(raw_px.sse_over_peak2));
+    if (raw_px.sse > 0) {
+      WorstPixel px;
+      px.x = int(i % size_t(w));
+      px.y = int(i / size_t(w));
+      px.error = raw_px.sse;
+      px.error_over_peak2 = raw_px.sse_over_peak2;
+      if (worst.size() < size_t(kWorstPixelsListed) || worse(px, worst.front())) {
+        for (int c = 0; c < 3; ++c) {
+          px.photo[c] = photo.data[i * 3 + c];
+          px.render[c] = render.data[i * 3 + c];
+        }
+        if (aux) px.region_bits = bits[i];
+        if (worst.size() == size_t(kWorstPixelsListed)) {
+          std::pop_heap(worst.begin(), worst.end(), worse);
+          worst.back() = px;
+        } else {
+          worst.push_back(px);
+        }
+        std::push_heap(worst.begin(), worst.end(), worse);
+      }
+    }
   }
+  std::sort_heap(worst.begin(), worst.end(), worse);
+  // Reorders pixel_errors, which the pooled shares read in any order.
+  score.worst_share = WorstErrorShares(&score.pixel_errors);
 
   // Tone maps: SSIM reads them only inside the bounding box of the evaluated pixels (SsimSum);
   // figures need the photograph and the render everywhere.

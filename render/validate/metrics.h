@@ -38,6 +38,20 @@
 // evaluated pixels of all images (PSNR = -10 log10(Σ e²/P² / N)), so each image weighs by its
 // pixel count and one image gives its own PSNR; relative RMSE pools Σ(r - p)² and Σ p²; SSIM
 // averages over all evaluated pixels; the bound pools variance / P².
+//
+// PSNR-L (the LDR PSNR of Stanford-ORB, Kuang et al. 2023): per image, q99 = the photograph's 99th
+// percentile over E and the three channels (nearest rank: the ceil(0.99 M)-th smallest of the
+// M = 3 |E| values); both images map through L(x) = sRGB(clip(x / q99, 0, 1)), sRGB the piecewise
+// OETF of IEC 61966-2-1 (12.92 x for x <= 0.0031308, else 1.055 x^(1/2.4) - 0.055); PSNR-L =
+// 10 log10(1 / MSE) over E and RGB, capped like the HDR PSNR. An image whose q99 is not a positive
+// finite number (an all-black photograph) has no PSNR-L: its values are left out of every PSNR-L
+// (null when nothing is left). Pooled over images (and regions) as the mean of the LDR squared
+// errors over all pixel channels of the images that have one: LDR values are already in [0, 1], so
+// no further normalisation. The scaled variant maps s_c r (the same q99).
+// Worst-pixel share: with the pixel error e = Σ_c (r - p)² (raw render), the share of Σ e over E
+// carried by the K = ceil(f |E|) pixels of largest e, f = 0.1 % and 1 %. Pooled over images, e is
+// divided by its own image's P² first (as PSNR pools), so the overall share is that of the error
+// behind the pooled PSNR; within one image P² cancels. null when Σ e is 0 or not finite.
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -69,6 +83,15 @@ constexpr int kSsimRadius = 5;          // 11x11 window
 constexpr double kSsimSigma = 1.5;      // px
 constexpr double kSsimK1 = 0.01, kSsimK2 = 0.03;
 
+// The percentile of the photograph that PSNR-L maps to white.
+constexpr double kLdrWhitePercentile = 0.99;
+// Worst-pixel shares: the worst kWorstPerMille[k] / 1000 of the evaluated pixels (0.1 %, 1 %).
+constexpr int kWorstShareCount = 2;
+constexpr int kWorstPerMille[kWorstShareCount] = {1, 10};
+// Worst pixels kept per image and listed in the report (overall): enough to see whether the worst
+// error sits in one spot, one image or one region, few enough for a table.
+constexpr int kWorstPixelsListed = 20;
+
 enum Region : int { kShadowEdge = 0, kHighCurvatureRegion, kGrazing, kElsewhere, kRegionCount };
 // "shadow_edge", "high_curvature", "grazing", "elsewhere".
 const char* RegionName(int region);
@@ -98,6 +121,8 @@ struct ErrorSums {
   double photo_sq = 0;             // Σ p²
   double noise_var_over_peak2 = 0; // Σ var(r) / P²   (0 when no noise model)
   double ssim_sum = 0;             // Σ over pixels of the SSIM averaged over channels
+  double ldr_values = 0;           // pixel channels of images that have a PSNR-L
+  double sse_ldr = 0;              // Σ (L(r) - L(p))² over those (PSNR-L)
 
   void Add(const ErrorSums& other);
   // nullopt when there are no values; capped at kMaxPsnrDb.
@@ -106,6 +131,30 @@ struct ErrorSums {
   std::optional<double> RelRmse() const;
   std::optional<double> Ssim() const;
   std::optional<double> NoiseBoundDb() const;  // needs noise_var_over_peak2 > 0 or caps
+  // 10 log10(1 / mean (L(r) - L(p))²); nullopt when no value has a PSNR-L; capped at kMaxPsnrDb.
+  std::optional<double> PsnrLDb() const;
+};
+
+// The sRGB OETF (IEC 61966-2-1) of a linear value x in [0, 1]; linear branch for x <= 0.0031308.
+// In float: display values need no more (errors ~1e-7 put a floor near 140 dB under PSNR-L, above
+// any real score), and powf costs half of pow (PSNR-L encodes 9 values per pixel).
+float SrgbEncode(float x);
+// L(x) of PSNR-L: SrgbEncode(clip(x inv_white, 0, 1)); NaN maps to 0 (as ToneMap does).
+float LdrValue(double x, double inv_white);
+// The nearest-rank percentile (the ceil(fraction M)-th smallest of the M values, fraction in
+// (0, 1]), found with nth_element (reorders *values); nullopt when *values is empty.
+std::optional<float> NearestRankPercentile(std::vector<float>* values, double fraction);
+// Shares of Σ errors carried by the ceil(kWorstPerMille[k] / 1000 · n) largest of the n errors
+// (nth_element; reorders *errors). nullopt when n = 0 or Σ errors is 0 or not finite.
+std::array<std::optional<double>, kWorstShareCount> WorstErrorShares(std::vector<float>* errors);
+
+// One evaluated pixel of an image and its error, for the worst-pixels table.
+struct WorstPixel {
+  int x = 0, y = 0;
+  std::array<float, 3> photo{}, render{};
+  uint8_t region_bits = 0;      // 1 << Region; 0 when the render has no aux buffers
+  double error = 0;             // Σ_c (r - p)²
+  double error_over_peak2 = 0;  // error / P² (the ranking key, pooled over images)
 };
 
 // What one photograph scores.
@@ -113,11 +162,18 @@ struct ImageScore {
   double peak = 0;                  // P
   double tone_mean = 0;             // m of the tone map
   std::array<double, 3> scale{};    // least-squares s_c
+  std::optional<double> q99;        // PSNR-L white (photograph's 99th percentile); none: no PSNR-L
   size_t excluded_invalid = 0;      // geometric-mask pixels dropped as saturated / non-finite
   ErrorSums raw, scaled;
   std::array<ErrorSums, kRegionCount> regions;  // raw
   bool has_regions = false;
   bool has_noise = false;
+  // Worst-pixel shares of this image (kWorstPerMille order).
+  std::array<std::optional<double>, kWorstShareCount> worst_share;
+  // e / P² of every evaluated pixel (order unspecified), for the shares pooled over images.
+  std::vector<float> pixel_errors;
+  // The (up to) kWorstPixelsListed pixels of largest error > 0, worst first (ties: row-major).
+  std::vector<WorstPixel> worst_pixels;
   // Figure data when requested (else empty): tone-mapped photograph and render (3 channels, the
   // whole image), and the error |r - p| / P averaged over channels (1 channel; -1 outside E).
   Image photo_tm, render_tm, error;

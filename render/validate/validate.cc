@@ -31,7 +31,25 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-Json OrNull(const std::optional<double>& v) { return v ? Json(*v) : Json(nullptr); }
+Json OrNull(const std::optional<double>& v) {
+  return v && std::isfinite(*v) ? Json(*v) : Json(nullptr);
+}
+
+// Adds the worst-pixel share fields to *j.
+void SharesJson(const std::array<std::optional<double>, kWorstShareCount>& shares, Json* j) {
+  static_assert(kWorstShareCount == 2 && kWorstPerMille[0] == 1 && kWorstPerMille[1] == 10,
+                "the field names below name 0.1 % and 1 %");
+  (*j)["worst_0_1pct_error_share"] = OrNull(shares[0]);
+  (*j)["worst_1pct_error_share"] = OrNull(shares[1]);
+}
+
+std::string RegionList(uint8_t bits) {
+  std::string out;
+  for (int k = 0; k < kRegionCount; ++k) {
+    if (bits & (1u << k)) out += (out.empty() ? "" : " ") + std::string(RegionName(k));
+  }
+  return out;
+}
 
 std::string Fixed(const std::optional<double>& v, int digits) {
   if (!v) return "&ndash;";
@@ -112,7 +130,9 @@ struct Entry {
 };
 
 Json SumsJson(const ErrorSums& s, bool with_ssim) {
-  Json j = {{"psnr_db", OrNull(s.PsnrDb())}, {"rel_rmse", OrNull(s.RelRmse())}};
+  Json j = {{"psnr_db", OrNull(s.PsnrDb())},
+            {"psnr_l_db", OrNull(s.PsnrLDb())},
+            {"rel_rmse", OrNull(s.RelRmse())}};
   if (with_ssim) j["ssim"] = OrNull(s.Ssim());
   return j;
 }
@@ -125,6 +145,7 @@ Json RegionsJson(const std::array<ErrorSums, kRegionCount>& regions, const Error
     Json region = {{"pixels", size_t(r.pixels)},
                    {"fraction", total.pixels > 0 ? r.pixels / total.pixels : 0.0},
                    {"psnr_db", OrNull(r.PsnrDb())},
+                   {"psnr_l_db", OrNull(r.PsnrLDb())},
                    {"rel_rmse", OrNull(r.RelRmse())},
                    {"sse_share", total.sse_over_peak2 > 0 ? r.sse_over_peak2 / total.sse_over_peak2
                                                           : 0.0}};
@@ -144,6 +165,22 @@ Json Definitions(const ValidateOptions& o) {
       {"psnr_db", StrCat("10 log10(peak^2 / MSE) over evaluated pixels and RGB channels; an exact "
                          "match reports the cap ", kMaxPsnrDb, " dB")},
       {"rel_rmse", "sqrt(sum (r - p)^2 / sum p^2) over evaluated pixels and RGB channels"},
+      {"psnr_l_db",
+       StrCat("Stanford-ORB LDR PSNR: photograph and render divided by q99 = the photograph's "
+              "99th percentile over evaluated pixels and RGB channels (nearest rank; psnr_l_white), "
+              "clipped to [0, 1], sRGB-encoded (IEC 61966-2-1 OETF); 10 log10(1 / MSE) over "
+              "evaluated pixels and RGB, capped at ", kMaxPsnrDb, " dB; null when q99 is not "
+              "positive and finite. Pooled: the mean LDR squared error over all pixel channels of "
+              "the images that have one")},
+      {"worst_error_share",
+       "worst_0_1pct_error_share / worst_1pct_error_share: share of sum e over the evaluated pixels "
+       "carried by the ceil(0.001 n) / ceil(0.01 n) pixels of largest e, e = sum over RGB of "
+       "(r - p)^2 (raw render); pooled over images with e divided by its image's peak^2 (as "
+       "psnr_db pools); null when sum e = 0"},
+      {"worst_pixels",
+       StrCat("the ", kWorstPixelsListed, " evaluated pixels of largest e / peak^2 over all "
+              "images: image file, pixel x (column) and y (row, 0 = top), photograph and render RGB, "
+              "error = e, error_share = its share of the pooled e / peak^2, regions")},
       {"tone_map", "t(x) = (y / (1 + y))^(1/2.2), y = max(x, 0) / m, m = mean of the photograph "
                    "over the evaluated pixels and channels; same t for photograph and render"},
       {"ssim", "Wang et al. 2004 on tone-mapped images per channel: 11x11 Gaussian window, sigma "
@@ -171,9 +208,20 @@ Json Definitions(const ValidateOptions& o) {
                   "per_image_mean averages the per-image values"}};
 }
 
+// PSNR, PSNR-L, rel. RMSE, SSIM.
 std::string MetricCells(const ErrorSums& s) {
-  return "<td>" + Fixed(s.PsnrDb(), 2) + "</td><td>" + Fixed(s.RelRmse(), 4) + "</td><td>" +
-         Fixed(s.Ssim(), 4) + "</td>";
+  return "<td>" + Fixed(s.PsnrDb(), 2) + "</td><td>" + Fixed(s.PsnrLDb(), 2) + "</td><td>" +
+         Fixed(s.RelRmse(), 4) + "</td><td>" + Fixed(s.Ssim(), 4) + "</td>";
+}
+
+std::string Share(const std::optional<double>& share) {
+  return share ? Fixed(100 * *share, 2) + "%" : Fixed(share, 2);
+}
+
+std::string RgbText(const std::array<float, 3>& v) {
+  char text[96];
+  std::snprintf(text, sizeof text, "%.4g, %.4g, %.4g", double(v[0]), double(v[1]), double(v[2]));
+  return text;
 }
 
 // Scalars of fit_report.json, flattened two levels deep ("timings.total_s").
@@ -324,12 +372,32 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   std::array<ErrorSums, kRegionCount> regions;
   bool all_regions = true;
   double mean_psnr = 0, mean_rel = 0, mean_ssim = 0, mean_spsnr = 0, mean_srel = 0, mean_sssim = 0,
-         mean_bound = 0;
-  size_t scored = 0;
+         mean_bound = 0, mean_psnr_l = 0, mean_spsnr_l = 0;
+  size_t scored = 0, scored_l = 0;
+  // Pooled worst-pixel shares: every image's e / P², concatenated in image order (each image's
+  // list is freed as it is moved, so the peak memory is one float per evaluated pixel).
+  std::vector<float> pixel_errors;
+  size_t total_pixels = 0;
+  for (const Entry& e : entries) total_pixels += e.score.pixel_errors.size();
+  pixel_errors.reserve(total_pixels);
+  struct ListedPixel {
+    size_t entry;
+    WorstPixel pixel;
+  };
+  std::vector<ListedPixel> worst_pixels;
   Json images = Json::array();
-  for (const Entry& e : entries) {
+  for (size_t n = 0; n < entries.size(); ++n) {
+    Entry& e = entries[n];
     const CaptureImage& image = capture.images[e.index];
     const ImageScore& s = e.score;
+    pixel_errors.insert(pixel_errors.end(), s.pixel_errors.begin(), s.pixel_errors.end());
+    e.score.pixel_errors = std::vector<float>();
+    for (const WorstPixel& px : s.worst_pixels) worst_pixels.push_back({n, px});
+    if (s.raw.PsnrLDb()) {
+      ++scored_l;
+      mean_psnr_l += *s.raw.PsnrLDb();
+      mean_spsnr_l += *s.scaled.PsnrLDb();
+    }
     raw.Add(s.raw);
     scaled.Add(s.scaled);
     all_regions &= s.has_regions;
@@ -356,8 +424,11 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
               {"excluded_saturated_or_nonfinite", s.excluded_invalid},
               {"peak", s.peak},
               {"psnr_db", OrNull(s.raw.PsnrDb())},
+              {"psnr_l_db", OrNull(s.raw.PsnrLDb())},
+              {"psnr_l_white", OrNull(s.q99)},
               {"rel_rmse", OrNull(s.raw.RelRmse())},
               {"ssim", OrNull(s.raw.Ssim())}};
+    SharesJson(s.worst_share, &j);
     Json sj = SumsJson(s.scaled, true);
     sj["scale"] = {s.scale[0], s.scale[1], s.scale[2]};
     j["scaled"] = sj;
@@ -367,9 +438,40 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     images.push_back(j);
   }
   auto mean = [&](double sum) { return scored ? Json(sum / double(scored)) : Json(nullptr); };
+  auto mean_l = [&](double sum) { return scored_l ? Json(sum / double(scored_l)) : Json(nullptr); };
+  const auto worst_share = WorstErrorShares(&pixel_errors);
+  pixel_errors = std::vector<float>();
+  // Worst first; ties keep image order, then each image's own order (stable sort).
+  std::stable_sort(worst_pixels.begin(), worst_pixels.end(),
+                   [](const ListedPixel& a, const ListedPixel& b) {
+                     return a.pixel.error_over_peak2 > b.pixel.error_over_peak2;
+                   });
+  if (worst_pixels.size() > size_t(kWorstPixelsListed)) worst_pixels.resize(kWorstPixelsListed);
+  Json worst_json = Json::array();
+  for (const ListedPixel& w : worst_pixels) {
+    const Entry& e = entries[w.entry];
+    const WorstPixel& px = w.pixel;
+    Json region_names = Json::array();
+    for (int k = 0; k < kRegionCount; ++k) {
+      if (px.region_bits & (1u << k)) region_names.push_back(RegionName(k));
+    }
+    worst_json.push_back(
+        {{"file", capture.images[e.index].file},
+         {"x", px.x},
+         {"y", px.y},
+         {"photo", {px.photo[0], px.photo[1], px.photo[2]}},
+         {"render", {px.render[0], px.render[1], px.render[2]}},
+         {"error", OrNull(px.error)},
+         {"error_share",
+          OrNull(raw.sse_over_peak2 > 0
+                     ? std::optional<double>(px.error_over_peak2 / raw.sse_over_peak2)
+                     : std::nullopt)},
+         {"regions", e.score.has_regions ? region_names : Json(nullptr)}});
+  }
   Json overall = {{"images", entries.size()},
                   {"pixels", size_t(raw.pixels)},
                   {"psnr_db", OrNull(raw.PsnrDb())},
+                  {"psnr_l_db", OrNull(raw.PsnrLDb())},
                   {"rel_rmse", OrNull(raw.RelRmse())},
                   {"ssim", OrNull(raw.Ssim())},
                   {"scaled", SumsJson(scaled, true)},
@@ -378,11 +480,14 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                   {"noise_bound_psnr_db", noise ? OrNull(raw.NoiseBoundDb()) : Json(nullptr)},
                   {"per_image_mean",
                    {{"psnr_db", mean(mean_psnr)},
+                    {"psnr_l_db", mean_l(mean_psnr_l)},
                     {"rel_rmse", mean(mean_rel)},
                     {"ssim", mean(mean_ssim)},
-                    {"scaled", {{"psnr_db", mean(mean_spsnr)}, {"rel_rmse", mean(mean_srel)},
-                                {"ssim", mean(mean_sssim)}}},
+                    {"scaled", {{"psnr_db", mean(mean_spsnr)}, {"psnr_l_db", mean_l(mean_spsnr_l)},
+                                {"rel_rmse", mean(mean_srel)}, {"ssim", mean(mean_sssim)}}},
                     {"noise_bound_psnr_db", noise ? mean(mean_bound) : Json(nullptr)}}}};
+  SharesJson(worst_share, &overall);
+  overall["worst_pixels"] = worst_json;
   if (noise) {
     overall["noise_model"] = {{"photon_sigma_at_1", noise->photon_sigma_at_1},
                               {"read_sigma", noise->read_sigma}};
@@ -542,16 +647,21 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
        << HtmlEscape(renders_dir.string()) << "</code>, split <b>"
        << render::SplitSelectionName(options.split) << "</b>: " << entries.size() << " images, "
        << size_t(raw.pixels) << " evaluated pixels.</p>\n";
-  html << "<h2>Summary</h2>\n<table><tr><th></th><th>PSNR (dB)</th><th>rel. RMSE</th>"
-          "<th>SSIM</th></tr>\n<tr><td>raw, pooled</td>"
+  html << "<h2>Summary</h2>\n<table><tr><th></th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
+          "<th>rel. RMSE</th><th>SSIM</th></tr>\n<tr><td>raw, pooled</td>"
        << MetricCells(raw) << "</tr>\n<tr><td>LS-scaled (Stanford-ORB), pooled</td>"
        << MetricCells(scaled) << "</tr>\n<tr><td>raw, mean over images</td><td>"
        << Fixed(scored ? std::optional<double>(mean_psnr / double(scored)) : std::nullopt, 2)
        << "</td><td>"
+       << Fixed(scored_l ? std::optional<double>(mean_psnr_l / double(scored_l)) : std::nullopt, 2)
+       << "</td><td>"
        << Fixed(scored ? std::optional<double>(mean_rel / double(scored)) : std::nullopt, 4)
        << "</td><td>"
        << Fixed(scored ? std::optional<double>(mean_ssim / double(scored)) : std::nullopt, 4)
-       << "</td></tr>\n</table>\n";
+       << "</td></tr>\n</table>\n<p>PSNR-L: Stanford-ORB's LDR PSNR (both images divided by the "
+          "photograph's 99th percentile, clipped to [0, 1], sRGB-encoded). Worst-pixel share of "
+          "the pooled squared error: worst 0.1 % of pixels "
+       << Share(worst_share[0]) << ", worst 1 % " << Share(worst_share[1]) << ".</p>\n";
   if (noise) {
     html << "<p>Noise bound (PSNR a perfect re-render scores under the capture's noise model, "
             "photon &sigma; "
@@ -568,7 +678,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   html << "<h2>Where the error is</h2>\n";
   if (all_regions) {
     html << "<table><tr><th>region</th><th>pixels</th><th>share of pixels</th>"
-            "<th>share of squared error</th><th>PSNR (dB)</th><th>rel. RMSE</th></tr>\n";
+            "<th>share of squared error</th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
+            "<th>rel. RMSE</th></tr>\n";
     for (int k = 0; k < kRegionCount; ++k) {
       const ErrorSums& r = regions[k];
       html << "<tr><td>" << RegionName(k) << "</td><td>" << size_t(r.pixels) << "</td><td>"
@@ -578,7 +689,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
            << Fixed(raw.sse_over_peak2 > 0
                         ? std::optional<double>(100 * r.sse_over_peak2 / raw.sse_over_peak2)
                         : std::nullopt, 1)
-           << "%</td><td>" << Fixed(r.PsnrDb(), 2) << "</td><td>" << Fixed(r.RelRmse(), 4)
+           << "%</td><td>" << Fixed(r.PsnrDb(), 2) << "</td><td>" << Fixed(r.PsnrLDb(), 2)
+           << "</td><td>" << Fixed(r.RelRmse(), 4)
            << "</td></tr>\n";
     }
     html << "</table>\n<p>shadow_edge: within " << options.score.shadow_edge_px
@@ -591,8 +703,9 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     html << "<p class=note>Some renders have no aux buffers: no region breakdown.</p>\n";
   }
   html << "<h2>Per image</h2>\n<table><tr><th>file</th><th>camera</th><th>light</th>"
-          "<th>turntable (&deg;)</th><th>pixels</th><th>PSNR (dB)</th><th>rel. RMSE</th>"
-          "<th>SSIM</th><th>scaled PSNR</th><th>scaled rel. RMSE</th><th>scaled SSIM</th>"
+          "<th>turntable (&deg;)</th><th>pixels</th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
+          "<th>rel. RMSE</th><th>SSIM</th><th>scaled PSNR</th><th>scaled PSNR-L</th>"
+          "<th>scaled rel. RMSE</th><th>scaled SSIM</th><th>worst 0.1 % share</th>"
        << (noise ? "<th>noise bound (dB)</th>" : "") << "</tr>\n";
   for (const Entry& e : entries) {
     const CaptureImage& image = capture.images[e.index];
@@ -601,11 +714,35 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
          << HtmlEscape(capture.cameras[image.camera].id) << "</td><td>"
          << HtmlEscape(capture.lights[image.light].id) << "</td><td>" << image.turntable_deg
          << "</td><td>" << size_t(e.score.raw.pixels) << "</td>" << MetricCells(e.score.raw)
-         << MetricCells(e.score.scaled);
+         << MetricCells(e.score.scaled) << "<td>" << Share(e.score.worst_share[0]) << "</td>";
     if (noise) html << "<td>" << Fixed(e.score.raw.NoiseBoundDb(), 2) << "</td>";
     html << "</tr>\n";
   }
-  html << "</table>\n<h2>Figures</h2>\n<p>Photograph | re-render | error |r &minus; p| / peak "
+  html << "</table>\n<h2>Worst pixels</h2>\n";
+  if (worst_pixels.empty()) {
+    html << "<p class=note>No evaluated pixel has an error.</p>\n";
+  } else {
+    html << "<p>The " << worst_pixels.size() << " evaluated pixels of largest error e = "
+            "&Sigma;<sub>RGB</sub> (r &minus; p)&sup2; relative to their image's peak&sup2;, over "
+            "all images; x = column, y = row (0 = top).</p>\n<table><tr><th>image</th><th>x</th>"
+            "<th>y</th><th>photograph RGB</th><th>render RGB</th><th>e</th>"
+            "<th>share of squared error</th><th>regions</th></tr>\n";
+    for (const ListedPixel& w : worst_pixels) {
+      const Entry& e = entries[w.entry];
+      const WorstPixel& px = w.pixel;
+      html << "<tr><td>" << (e.figure ? "<a href=\"#" + HtmlEscape(e.key) + "\">" : "")
+           << HtmlEscape(capture.images[e.index].file) << (e.figure ? "</a>" : "") << "</td><td>"
+           << px.x << "</td><td>" << px.y << "</td><td>" << RgbText(px.photo) << "</td><td>"
+           << RgbText(px.render) << "</td><td>" << Fixed(px.error, 5) << "</td><td>"
+           << Share(raw.sse_over_peak2 > 0
+                        ? std::optional<double>(px.error_over_peak2 / raw.sse_over_peak2)
+                        : std::nullopt)
+           << "</td><td>" << (e.score.has_regions ? RegionList(px.region_bits) : "&ndash;")
+           << "</td></tr>\n";
+    }
+    html << "</table>\n";
+  }
+  html << "<h2>Figures</h2>\n<p>Photograph | re-render | error |r &minus; p| / peak "
           "(mean over RGB; colour bar in % of the photograph's peak, "
        << FormatPercent(error_scale) << " at the top; grey = not evaluated). Tone map: x/(1+x) "
           "after dividing by the photograph's mean over the evaluated pixels, then gamma 1/2.2, "
@@ -646,6 +783,10 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   summary.scaled_psnr_db = scaled.PsnrDb();
   summary.scaled_rel_rmse = scaled.RelRmse();
   summary.scaled_ssim = scaled.Ssim();
+  summary.psnr_l_db = raw.PsnrLDb();
+  summary.scaled_psnr_l_db = scaled.PsnrLDb();
+  summary.worst_0_1pct_error_share = worst_share[0];
+  summary.worst_1pct_error_share = worst_share[1];
   if (noise) summary.noise_bound_psnr_db = raw.NoiseBoundDb();
   summary.seconds = SecondsSince(start);
   return summary;

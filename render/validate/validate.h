@@ -6,8 +6,8 @@
 // (re-renders, masks/, aux/), optionally the fit folder (FIT/fit_report.json, FIT/status.exr) and
 // the sample store (SAMPLES/coverage.png) for the report.
 // Output folder (the caller stages it):
-//   metrics.json              images (per-image metrics), overall (pooled + per-image mean),
-//                             capture, renders, split, definitions, timings
+//   metrics.json              images (per-image metrics), overall (pooled + per-image mean,
+//                             worst pixels), capture, renders, split, definitions, timings
 //   figures/<key>.png         photograph | re-render | error heat map, for up to max_figures
 //                             images (evenly spaced over the selection when there are more)
 //   figures/<key>_regions.png the region labels of that image
@@ -51,6 +51,9 @@ struct ValidateSummary {
   std::optional<double> psnr_db, rel_rmse, ssim;                       // overall, raw
   std::optional<double> scaled_psnr_db, scaled_rel_rmse, scaled_ssim;  // overall, LS-scaled
   std::optional<double> noise_bound_psnr_db;                           // when the noise is known
+  std::optional<double> psnr_l_db, scaled_psnr_l_db;                   // overall PSNR-L
+  // Overall shares of the pooled squared error carried by the worst 0.1 % / 1 % of pixels.
+  std::optional<double> worst_0_1pct_error_share, worst_1pct_error_share;
   double seconds = 0;
 };
 

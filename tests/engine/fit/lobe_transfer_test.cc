@@ -13,85 +13,19 @@
 #include "engine/brdf/lafortune.h"
 #include "engine/fit/fit_store.h"
 #include "tests/engine/fit/fit_test_util.h"
+#include "tests/engine/fit/transfer_fixtures.h"
 #include "engine/math/types.h"
 
 namespace reflcap::fit {
 namespace {
 
+using testing::Chunk;
+using testing::DonorFit;
+using testing::Glossy;
 using testing::LineAtlas;
+using testing::RecipientFit;
+using testing::Samples;
 using testing::StoreOf;
-
-// The glossy material the tests use: albedo (0.4, 0.3, 0.2) and a mirror lobe of peak `peak` / sr,
-// n = 40 (half-width ~11 degrees). Peak 0.5 stays within the transfer's evidence bound (10x the
-// recipient's brightest sample per channel: blue, the darkest, shows 0.2 / pi = 0.064 / sr off the
-// highlight); peak 5 exceeds it.
-brdf::BrdfParams Glossy(double peak = 0.5) {
-  brdf::BrdfParams p;
-  p.num_lobes = 1;
-  p.rho_d = {0.4f, 0.3f, 0.2f};
-  for (int c = 0; c < brdf::kChannels; ++c) p.lobes[0][c] = brdf::MirrorLobe(peak, 40.0);
-  return p;
-}
-
-TexelFit DonorFit(const brdf::BrdfParams& p) {
-  TexelFit f;
-  f.params = p;
-  f.status = FitStatus::kConverged;
-  f.samples = 50;
-  return f;
-}
-
-// A recipient as the fitter leaves it: Lambert-only (zero lobe), kUnidentifiableLobe.
-TexelFit RecipientFit(const std::array<float, 3>& rho) {
-  TexelFit f;
-  f.params.num_lobes = 1;
-  f.params.rho_d = rho;
-  for (int c = 0; c < brdf::kChannels; ++c) f.params.lobes[0][c] = {0, 0, 0, 20};
-  f.status = FitStatus::kUnidentifiableLobe;
-  f.lambert_only = true;
-  f.samples = 24;
-  return f;
-}
-
-Vec3f Direction(double theta_deg, double phi_deg) {
-  const double t = DegToRad(theta_deg), p = DegToRad(phi_deg);
-  return Vec3f(float(std::sin(t) * std::cos(p)), float(std::sin(t) * std::sin(p)), float(std::cos(t)));
-}
-
-// Samples of `truth` for one texel: 24 configurations, wi at 20..70 degrees from the normal and
-// azimuth 0, wo at the same elevation and azimuth 60..90 or 260..290 — at least 90 degrees of
-// azimuth from the mirror direction (azimuth 180), where an n = 40 lobe is negligible — except,
-// with `near_mirror`, every sixth sample, which lies exactly on the mirror direction.
-std::vector<BrdfSample> Samples(const brdf::BrdfParams& truth, bool near_mirror) {
-  std::vector<BrdfSample> out;
-  for (int i = 0; i < 24; ++i) {
-    const Vec3f wi = Direction(20 + 10 * (i % 6), 0);
-    const double phi = near_mirror && i % 6 == 0 ? 180 : 60 + 10 * (i / 6) + (i % 2 ? 200 : 0);
-    const Vec3f wo = Direction(20 + 10 * (i % 6), phi);
-    BrdfSample s{};
-    const Vec3f f = brdf::EvalRgb(truth, wi, wo);
-    for (int j = 0; j < 3; ++j) {
-      s.wi[j] = wi[j];
-      s.wo[j] = wo[j];
-      s.value[j] = f[j];
-      s.weight[j] = 1e4f;  // sigma 0.01 / sr
-    }
-    out.push_back(s);
-  }
-  return out;
-}
-
-TexelSampleChunk Chunk(const std::vector<std::vector<BrdfSample>>& per_texel) {
-  TexelSampleChunk chunk;
-  chunk.first_texel = 0;
-  chunk.texel_count = uint32_t(per_texel.size());
-  chunk.offsets.push_back(0);
-  for (const auto& v : per_texel) {
-    chunk.samples.insert(chunk.samples.end(), v.begin(), v.end());
-    chunk.offsets.push_back(chunk.samples.size());
-  }
-  return chunk;
-}
 
 TEST(LobeTransfer, ASimilarNeighboursLobeIsLentWhenTheSamplesAgree) {
   const brdf::BrdfParams truth = Glossy();

@@ -318,3 +318,196 @@ TEST(Metrics, ScoreImageSsimIsSsimSumOfTheToneMappedImages) {
 
 }  // namespace
 }  // namespace reflcap::validate
+
+namespace reflcap::validate {
+namespace {
+
+// Tolerance for closed-form PSNR-L values: SrgbEncode runs in float (relative error ~1e-7 in
+// 1 - sRGB(0.5), i.e. ~1e-6 dB); the squared errors are summed in double.
+constexpr double kClosedFormDb = 1e-5;
+
+TEST(PsnrL, SrgbEncodingAtItsEndsAndAtTheLinearBoundary) {
+  EXPECT_EQ(SrgbEncode(0), 0.0f);
+  EXPECT_NEAR(SrgbEncode(1), 1.0, 1e-7);          // 1.055 - 0.055 in float
+  EXPECT_NEAR(SrgbEncode(0.5f), 0.7353569830524495, 1e-7);
+  // x = 0.0031308 takes the linear branch (IEC 61966-2-1: x <= 0.0031308) ...
+  EXPECT_EQ(SrgbEncode(0.0031308f), 12.92f * 0.0031308f);
+  EXPECT_EQ(SrgbEncode(0.001f), 12.92f * 0.001f);
+  // ... and the next float the power branch; the standard's rounded constants leave a step of
+  // 2.9e-8 between the branches there (0.040449936 vs 0.0404499075), and float rounding of the
+  // result is 3.7e-9 (half an ulp at 0.04): 5e-8 bounds both.
+  const float above = std::nextafter(0.0031308f, 1.0f);
+  EXPECT_EQ(SrgbEncode(above), 1.055f * std::pow(above, 1 / 2.4f) - 0.055f);
+  EXPECT_NEAR(SrgbEncode(above), SrgbEncode(0.0031308f), 5e-8);
+  EXPECT_NEAR(SrgbEncode(above), 1.055 * std::pow(double(above), 1 / 2.4) - 0.055, 1e-8);
+  // L clips before encoding; NaN reads as black.
+  EXPECT_EQ(LdrValue(-3, 1), 0.0f);
+  EXPECT_EQ(LdrValue(7, 0.5), 1.0f);
+  EXPECT_EQ(LdrValue(std::nan(""), 1), 0.0f);
+  EXPECT_EQ(LdrValue(INFINITY, 1), 1.0f);
+}
+
+TEST(PsnrL, NearestRankPercentile) {
+  // 1..100: the 99th percentile is the 99th smallest, 99 (not 100: 0.99 · 100 is exactly 99).
+  std::vector<float> values;
+  for (int i = 100; i >= 1; --i) values.push_back(float(i));
+  EXPECT_EQ(*NearestRankPercentile(&values, 0.99), 99.0f);
+  // 1..101: rank ceil(99.99) = 100.
+  values.push_back(101);
+  EXPECT_EQ(*NearestRankPercentile(&values, 0.99), 100.0f);
+  std::vector<float> one = {4};
+  EXPECT_EQ(*NearestRankPercentile(&one, 0.99), 4.0f);
+  std::vector<float> none;
+  EXPECT_FALSE(NearestRankPercentile(&none, 0.99).has_value());
+}
+
+TEST(PsnrL, ConstantImagesGiveTheClosedForm) {
+  // Photograph 2 everywhere: q99 = 2, L(p) = sRGB(1) = 1. Render 1: L(r) = sRGB(0.5) = 0.73536.
+  // PSNR-L = -10 log10((1 - sRGB(0.5))²) = 11.5468 dB, the same in every region and pooled.
+  const int size = 30;
+  const Image photo(size, size, 3, 2.0f), render(size, size, 3, 1.0f);
+  const Image mask = Square(size, 0, 0, size);
+  const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  ASSERT_TRUE(s.q99.has_value());
+  EXPECT_EQ(*s.q99, 2.0);
+  const double expected = -20 * std::log10(1 - (1.055 * std::pow(0.5, 1 / 2.4) - 0.055));
+  EXPECT_NEAR(expected, 11.546791222281529, 1e-12);  // python3, double
+  ASSERT_TRUE(s.raw.PsnrLDb().has_value());
+  EXPECT_NEAR(*s.raw.PsnrLDb(), expected, kClosedFormDb);
+  // The LS scale is 2 per channel: the scaled render equals the photograph.
+  EXPECT_EQ(*s.scaled.PsnrLDb(), kMaxPsnrDb);
+  // The HDR PSNR differs: 10 log10(2² / 1²) = 6.02 dB.
+  EXPECT_NEAR(*s.raw.PsnrDb(), 20 * std::log10(2.0), kClosedFormDb);
+  // Pooled with a copy of itself (ErrorSums::Add): the same PSNR-L.
+  ErrorSums pooled = s.raw;
+  pooled.Add(s.raw);
+  EXPECT_NEAR(*pooled.PsnrLDb(), expected, kClosedFormDb);
+}
+
+TEST(PsnrL, ValuesAboveTheWhitePointClipInBothImages) {
+  // 40 x 40 photograph at 1 with 5 bright pixels (15 of 4800 values, 0.3 % < 1 %) at 5: q99 = 1.
+  // The render gets 3 at the bright pixels: a large HDR error, but both clip to white, so PSNR-L
+  // sees no error at all (the cap), while the HDR PSNR does.
+  const int size = 40;
+  Image photo(size, size, 3, 1.0f);
+  Image render = photo;
+  for (int k = 0; k < 5; ++k) {
+    for (int c = 0; c < 3; ++c) {
+      photo.at(5 + 6 * k, 20, c) = 5;
+      render.at(5 + 6 * k, 20, c) = 3;
+    }
+  }
+  const Image mask = Square(size, 0, 0, size);
+  const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  EXPECT_EQ(*s.q99, 1.0);
+  EXPECT_EQ(*s.raw.PsnrLDb(), kMaxPsnrDb);
+  EXPECT_LT(*s.raw.PsnrDb(), 40);
+  // One bright render pixel below white (0.5 under a photograph of 5) is seen: it can fail.
+  render.at(5, 20, 0) = 0.5f;
+  const ImageScore t = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  EXPECT_LT(*t.raw.PsnrLDb(), 50);
+}
+
+TEST(PsnrL, ScaleInvariantPsnrLRecoversAHalvedRender) {
+  const Image photo = RandomImage(36, 36, 21);
+  Image render = photo;
+  for (float& v : render.data) v *= 0.5f;
+  const Image mask = Square(36, 2, 2, 30);
+  const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  ASSERT_TRUE(s.raw.PsnrLDb() && s.scaled.PsnrLDb());
+  EXPECT_LT(*s.raw.PsnrLDb(), 20) << "a render at half the brightness is far off in LDR too";
+  // The scale is exactly 2 up to float rounding of the products: the scaled render matches to
+  // ~1e-7, i.e. well above 100 dB.
+  EXPECT_GT(*s.scaled.PsnrLDb(), 100);
+  EXPECT_GE(*s.scaled.PsnrLDb(), *s.raw.PsnrLDb());
+}
+
+TEST(PsnrL, AnAllBlackPhotographHasNoPsnrLAndNoNaN) {
+  const Image photo(20, 20, 3, 0.0f), render(20, 20, 3, 0.1f);
+  const Image mask = Square(20, 0, 0, 20);
+  const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  EXPECT_FALSE(s.q99.has_value());
+  EXPECT_FALSE(s.raw.PsnrLDb().has_value());
+  EXPECT_FALSE(s.scaled.PsnrLDb().has_value());
+  EXPECT_EQ(s.raw.ldr_values, 0.0);
+  ASSERT_TRUE(s.raw.PsnrDb().has_value());  // the HDR PSNR falls back to errors relative to 1
+  EXPECT_TRUE(std::isfinite(*s.raw.PsnrDb()));
+  // Pooled with an image that has one, the black image's values stay out of PSNR-L.
+  const Image lit(20, 20, 3, 2.0f), half(20, 20, 3, 1.0f);
+  const ImageScore l = ScoreImage(lit, half, mask, nullptr, std::nullopt, {});
+  ErrorSums pooled = s.raw;
+  pooled.Add(l.raw);
+  EXPECT_NEAR(*pooled.PsnrLDb(), *l.raw.PsnrLDb(), kClosedFormDb);
+  // Black against black: no error anywhere, so no worst-pixel share (0 / 0), never NaN.
+  const ImageScore b = ScoreImage(photo, photo, mask, nullptr, std::nullopt, {});
+  EXPECT_FALSE(b.worst_share[0].has_value());
+  EXPECT_TRUE(b.worst_pixels.empty());
+}
+
+TEST(WorstPixels, SharesOfOnePixelAndOfUniformError) {
+  // One pixel carries all the error: both shares are 1.
+  std::vector<float> one(5000, 0.0f);
+  one[1234] = 0.7f;
+  auto shares = WorstErrorShares(&one);
+  EXPECT_EQ(*shares[0], 1.0);
+  EXPECT_EQ(*shares[1], 1.0);
+  // Uniform error over 1000 pixels: the worst 1 (0.1 %) and 10 (1 %) carry 1/1000 and 10/1000;
+  // 1e-12 bounds the rounding of the double sums of equal floats.
+  std::vector<float> uniform(1000, 0.25f);
+  shares = WorstErrorShares(&uniform);
+  EXPECT_NEAR(*shares[0], 0.001, 1e-12);
+  EXPECT_NEAR(*shares[1], 0.01, 1e-12);
+  // 1500 pixels: ceil(1.5) = 2 and ceil(15) = 15 pixels.
+  std::vector<float> uneven(1500, 0.25f);
+  shares = WorstErrorShares(&uneven);
+  EXPECT_NEAR(*shares[0], 2.0 / 1500, 1e-12);
+  EXPECT_NEAR(*shares[1], 15.0 / 1500, 1e-12);
+  // Two levels: 1000 errors of 1 and 9000 of 0.1 (total 1900); the worst 10 carry 10, the worst
+  // 100 carry 100.
+  std::vector<float> levels(10000, 0.1f);
+  for (int i = 0; i < 1000; ++i) levels[size_t(i) * 10 + 3] = 1;
+  shares = WorstErrorShares(&levels);
+  EXPECT_NEAR(*shares[0], 10.0 / (1000 + 9000 * double(0.1f)), 1e-9);
+  EXPECT_NEAR(*shares[1], 100.0 / (1000 + 9000 * double(0.1f)), 1e-9);
+  std::vector<float> empty, zero(10, 0.0f), bad = {1.0f, NAN};
+  EXPECT_FALSE(WorstErrorShares(&empty)[0].has_value());
+  EXPECT_FALSE(WorstErrorShares(&zero)[1].has_value());
+  EXPECT_FALSE(WorstErrorShares(&bad)[0].has_value());
+}
+
+TEST(WorstPixels, ScoreImageRanksTheWorstPixelsAndReportsTheirShare) {
+  // 40 x 40 evaluated pixels at 0.5; the render is off by 0.01 everywhere, by 0.3 at (7, 9) and by
+  // 0.2 at (30, 2) (one channel each). Pixel errors: 3e-4 uniformly, 0.09 + 2e-4, 0.04 + 2e-4.
+  const int size = 40;
+  const Image photo(size, size, 3, 0.5f);
+  Image render(size, size, 3, 0.51f);
+  render.at(7, 9, 1) = 0.8f;
+  render.at(30, 2, 2) = 0.7f;
+  const Image mask = Square(size, 0, 0, size);
+  const ImageScore s = ScoreImage(photo, render, mask, nullptr, std::nullopt, {});
+  ASSERT_EQ(s.worst_pixels.size(), size_t(kWorstPixelsListed));
+  EXPECT_EQ(s.worst_pixels[0].x, 7);
+  EXPECT_EQ(s.worst_pixels[0].y, 9);
+  EXPECT_EQ(s.worst_pixels[0].render[1], 0.8f);
+  EXPECT_EQ(s.worst_pixels[0].photo[1], 0.5f);
+  EXPECT_EQ(s.worst_pixels[1].x, 30);
+  EXPECT_EQ(s.worst_pixels[1].y, 2);
+  // Then equal errors in row-major order: (0, 0), (1, 0), ...
+  EXPECT_EQ(s.worst_pixels[2].x, 0);
+  EXPECT_EQ(s.worst_pixels[2].y, 0);
+  EXPECT_EQ(s.worst_pixels[3].x, 1);
+  // 0.1 % of 1600 pixels is 2: the two outliers. Float inputs make the errors inexact; 1e-5
+  // relative covers float rounding of 0.51 - 0.5 (~2e-6 relative in its square).
+  auto sq = [](double v) { return v * v; };
+  const double e_uniform = 3 * sq(double(0.51f) - 0.5);
+  const double e1 = sq(double(0.8f) - 0.5) + 2 * sq(double(0.51f) - 0.5);
+  const double e2 = sq(double(0.7f) - 0.5) + 2 * sq(double(0.51f) - 0.5);
+  const double total = e1 + e2 + 1598 * e_uniform;
+  EXPECT_NEAR(*s.worst_share[0], (e1 + e2) / total, 1e-5 * (e1 + e2) / total);
+  // 1 % is 16 pixels: the outliers and 14 uniform ones.
+  EXPECT_NEAR(*s.worst_share[1], (e1 + e2 + 14 * e_uniform) / total, 1e-5);
+  EXPECT_EQ(s.pixel_errors.size(), 1600u);
+}
+
+}  // namespace
+}  // namespace reflcap::validate

@@ -126,6 +126,37 @@ TEST(Validate, HoldoutPsnrFromGroundTruthMeetsTheNoiseBound) {
                           "scaled", "regions", "noise_bound_psnr_db"}) {
     EXPECT_TRUE(first.contains(key)) << key;
   }
+  // PSNR-L, its scaled variant and the worst-pixel shares, overall and per image: finite and in
+  // range (noise only: the scale is ~1, so scaled PSNR-L is within a few tenths of a dB of raw).
+  for (const Json* j : {&overall, &first}) {
+    ASSERT_TRUE((*j)["psnr_l_db"].is_number());
+    ASSERT_TRUE((*j)["scaled"]["psnr_l_db"].is_number());
+    EXPECT_GT((*j)["psnr_l_db"].get<double>(), 20);
+    EXPECT_LT((*j)["psnr_l_db"].get<double>(), kMaxPsnrDb);
+    EXPECT_NEAR((*j)["scaled"]["psnr_l_db"].get<double>(), (*j)["psnr_l_db"].get<double>(), 0.5);
+    const double s01 = (*j)["worst_0_1pct_error_share"].get<double>();
+    const double s1 = (*j)["worst_1pct_error_share"].get<double>();
+    EXPECT_GE(s01, 0.001);  // the worst pixels carry at least their share of pixels
+    EXPECT_LE(s01, s1);
+    EXPECT_LE(s1, 1.0);
+  }
+  EXPECT_TRUE(first["psnr_l_white"].get<double>() > 0);
+  EXPECT_TRUE(overall["per_image_mean"]["psnr_l_db"].is_number());
+  EXPECT_TRUE(overall["regions"]["elsewhere"]["psnr_l_db"].is_number());
+  // The worst-pixels table: kWorstPixelsListed entries, worst first, each naming a holdout image.
+  const Json& worst = overall["worst_pixels"];
+  ASSERT_EQ(worst.size(), size_t(kWorstPixelsListed));
+  for (size_t k = 0; k < worst.size(); ++k) {
+    EXPECT_EQ(worst[k]["photo"].size(), 3u);
+    EXPECT_EQ(worst[k]["render"].size(), 3u);
+    EXPECT_TRUE(worst[k]["regions"].is_array());
+    if (k > 0) {
+      EXPECT_LE(worst[k]["error_share"].get<double>(), worst[k - 1]["error_share"].get<double>());
+    }
+  }
+  double listed_share = 0;
+  for (const Json& w : worst) listed_share += w["error_share"].get<double>();
+  EXPECT_LE(listed_share, overall["worst_1pct_error_share"].get<double>() + 1e-12);
   // Every image scores near its own bound too (fewer pixels: looser, 1 dB).
   for (const Json& image : metrics["images"]) {
     EXPECT_NEAR(image["psnr_db"].get<double>(), image["noise_bound_psnr_db"].get<double>(), 1.0)
@@ -139,6 +170,8 @@ TEST(Validate, HoldoutPsnrFromGroundTruthMeetsTheNoiseBound) {
   const std::string html = ReadTextFile(dir / "report/report.html").value();
   EXPECT_NE(html.find("<img src=\"figures/"), std::string::npos);
   EXPECT_NE(html.find("Where the error is"), std::string::npos);
+  EXPECT_NE(html.find("<h2>Worst pixels</h2>"), std::string::npos);
+  EXPECT_NE(html.find("PSNR-L (dB)"), std::string::npos);
   EXPECT_EQ(html.find("</html>") + 8, html.size());
 }
 
@@ -165,6 +198,14 @@ TEST(Validate, ExactRendersReportTheFiniteCapAndMissingFitFilesAreSkipped) {
   const std::string text = ReadTextFile(dir / "report/metrics.json").value();
   EXPECT_EQ(Json::parse(text)["overall"]["psnr_db"].get<double>(), kMaxPsnrDb);
   EXPECT_EQ(text.find("Infinity"), std::string::npos);
+  // PSNR-L caps too; no error at all leaves no worst pixel and no share (0 / 0 is null).
+  EXPECT_EQ(*summary->psnr_l_db, kMaxPsnrDb);
+  EXPECT_EQ(*summary->scaled_psnr_l_db, kMaxPsnrDb);
+  EXPECT_FALSE(summary->worst_0_1pct_error_share.has_value());
+  const Json exact = Json::parse(text)["overall"];
+  EXPECT_TRUE(exact["worst_0_1pct_error_share"].is_null());
+  EXPECT_TRUE(exact["worst_1pct_error_share"].is_null());
+  EXPECT_TRUE(exact["worst_pixels"].empty());
   const std::string html = ReadTextFile(dir / "report/report.html").value();
   EXPECT_NE(html.find("fit_report.json is absent"), std::string::npos);
   EXPECT_NE(html.find("coverage.png is absent"), std::string::npos);

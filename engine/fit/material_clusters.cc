@@ -1,0 +1,538 @@
+#include "engine/fit/material_clusters.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <utility>
+
+#include <Eigen/Eigenvalues>
+#include <ceres/ceres.h>
+
+#include "engine/core/check.h"
+#include "engine/core/parallel.h"
+#include "engine/fit/problem.h"
+
+namespace reflcap::fit {
+
+Status MaterialClusterOptions::Validate() const {
+  if (!(chroma_scale > 0 && std::isfinite(chroma_scale)) ||
+      !(level_scale > 0 && std::isfinite(level_scale))) {
+    return InvalidArgumentError("material cluster scales (chroma ", chroma_scale, ", level ",
+                                level_scale, ") must be finite and > 0");
+  }
+  if (max_clusters < 1 || max_clusters > 4096) {
+    return InvalidArgumentError("material clusters ", max_clusters, " outside [1, 4096]");
+  }
+  if (min_cluster_texels < 1) {
+    return InvalidArgumentError("material cluster minimum size ", min_cluster_texels, " < 1");
+  }
+  if (pool_texels < 1 || pool_texels > 65536) {
+    return InvalidArgumentError("material cluster pool ", pool_texels, " outside [1, 65536]");
+  }
+  if (lobes_per_cluster < 1 || lobes_per_cluster > kClusterLobeCandidates) {
+    return InvalidArgumentError("lobes per material cluster ", lobes_per_cluster,
+                                " outside [1, ", kClusterLobeCandidates, "]");
+  }
+  return OkStatus();
+}
+
+namespace {
+
+// Below this summed albedo (three 0.1 % reflectances) a texel is black: its chromaticity is
+// noise, so the level is floored here and the chromaticity taken against the floor.
+constexpr double kBlackLevel = 3e-3;
+// Lloyd iterations of one 2-means split: the principal-axis start is already close; a few
+// iterations settle the boundary.
+constexpr int kLloydIterations = 8;
+
+using Feature = Eigen::Vector3d;
+
+bool HasOwnLobe(const FitStore& fits, size_t t) {
+  return fits.status(t) == FitStatus::kConverged && !fits.lambert_only(t) && fits.donor(t) < 0;
+}
+
+// Saw its mirror configuration and showed no lobe: evidence of matte.
+bool LobeAbsent(const FitStore& fits, size_t t) {
+  return fits.status(t) == FitStatus::kConverged && fits.lambert_only(t);
+}
+
+Feature AlbedoFeature(const float* rho, const MaterialClusterOptions& options) {
+  double r[brdf::kChannels];
+  double sum = 0;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    // A fit never stores a negative or non-finite albedo; guarded anyway, the features must be
+    // finite for the split to be.
+    r[c] = std::isfinite(rho[c]) ? std::max(0.0, double(rho[c])) : 0.0;
+    sum += r[c];
+  }
+  const double level = std::max(sum, kBlackLevel);
+  return Feature(r[0] / level / options.chroma_scale, r[1] / level / options.chroma_scale,
+                 std::log(level) / options.level_scale);
+}
+
+struct Node {
+  std::vector<uint32_t> items;  // indices into the feature list, ascending
+  double sse = 0;               // sum of squared distances to the mean
+  bool final = false;
+};
+
+double SumSquares(const std::vector<Feature>& f, const std::vector<uint32_t>& items) {
+  Feature mean = Feature::Zero();
+  for (uint32_t i : items) mean += f[i];
+  mean /= double(std::max<size_t>(items.size(), 1));
+  double sse = 0;
+  for (uint32_t i : items) sse += (f[i] - mean).squaredNorm();
+  return sse;
+}
+
+// Splits `items` in two by 2-means from the principal axis; false when a side would be empty.
+bool Split(const std::vector<Feature>& f, const std::vector<uint32_t>& items,
+           std::vector<uint32_t>* a, std::vector<uint32_t>* b) {
+  Feature mean = Feature::Zero();
+  for (uint32_t i : items) mean += f[i];
+  mean /= double(items.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (uint32_t i : items) cov += (f[i] - mean) * (f[i] - mean).transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  const Feature axis = eig.eigenvectors().col(2);  // largest eigenvalue last
+  std::vector<uint8_t> side(items.size());
+  for (size_t k = 0; k < items.size(); ++k) side[k] = (f[items[k]] - mean).dot(axis) > 0;
+  for (int it = 0; it < kLloydIterations; ++it) {
+    Feature m[2] = {Feature::Zero(), Feature::Zero()};
+    size_t n[2] = {0, 0};
+    for (size_t k = 0; k < items.size(); ++k) {
+      m[side[k]] += f[items[k]];
+      ++n[side[k]];
+    }
+    if (n[0] == 0 || n[1] == 0) return false;
+    m[0] /= double(n[0]);
+    m[1] /= double(n[1]);
+    bool changed = false;
+    for (size_t k = 0; k < items.size(); ++k) {
+      const uint8_t s = (f[items[k]] - m[1]).squaredNorm() < (f[items[k]] - m[0]).squaredNorm();
+      changed = changed || s != side[k];
+      side[k] = s;
+    }
+    if (!changed) break;
+  }
+  a->clear();
+  b->clear();
+  for (size_t k = 0; k < items.size(); ++k) (side[k] ? b : a)->push_back(items[k]);
+  return !a->empty() && !b->empty();
+}
+
+}  // namespace
+
+bool MaterialClusters::PoolIn(uint64_t first, uint64_t end) const {
+  const auto it = std::lower_bound(all_pool.begin(), all_pool.end(), first,
+                                   [](uint32_t t, uint64_t v) { return uint64_t(t) < v; });
+  return it != all_pool.end() && uint64_t(*it) < end;
+}
+
+bool MaterialClusters::KeptIn(uint64_t first, uint64_t end) const {
+  for (uint64_t t = first; t < end && t < cluster_of.size(); ++t) {
+    if (cluster_of[t] >= 0 && !kept[size_t(cluster_of[t])].empty()) return true;
+  }
+  return false;
+}
+
+MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClusterOptions& options,
+                                       MaterialClusterStats* stats) {
+  MaterialClusters out;
+  out.cluster_of.assign(fits.size(), -1);
+  if (!options.enabled || fits.lobes() == 0) return out;
+  std::vector<uint32_t> texel;  // feature index -> texel
+  std::vector<Feature> f;
+  for (size_t t = 0; t < fits.size(); ++t) {
+    if (fits.samples(t) < kMinTransferSamples) continue;
+    texel.push_back(uint32_t(t));
+    f.push_back(AlbedoFeature(fits.params(t), options));
+  }
+  if (texel.empty()) return out;
+
+  // Bisecting 2-means: split the node with the largest spread while its mean squared spread
+  // exceeds 1 unit^2 and both halves keep min_cluster_texels.
+  std::vector<Node> nodes(1);
+  nodes[0].items.resize(texel.size());
+  std::iota(nodes[0].items.begin(), nodes[0].items.end(), 0u);
+  nodes[0].sse = SumSquares(f, nodes[0].items);
+  const size_t min_size = size_t(options.min_cluster_texels);
+  std::vector<uint32_t> a, b;
+  while (int(nodes.size()) < options.max_clusters) {
+    int pick = -1;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+      const Node& n = nodes[i];
+      if (n.final || n.items.size() < 2 * min_size || n.sse <= double(n.items.size())) continue;
+      if (pick < 0 || n.sse > nodes[size_t(pick)].sse) pick = int(i);
+    }
+    if (pick < 0) break;
+    Node& node = nodes[size_t(pick)];
+    if (!Split(f, node.items, &a, &b) || a.size() < min_size || b.size() < min_size) {
+      node.final = true;
+      continue;
+    }
+    node.items = a;
+    node.sse = SumSquares(f, a);
+    Node other;
+    other.items = b;
+    other.sse = SumSquares(f, b);
+    nodes.push_back(std::move(other));
+  }
+  // Cluster ids in order of each cluster's first texel: the ids do not depend on split order.
+  std::sort(nodes.begin(), nodes.end(),
+            [](const Node& x, const Node& y) { return x.items.front() < y.items.front(); });
+
+  const size_t k_count = nodes.size();
+  out.count = int(k_count);
+  out.candidates.resize(k_count);
+  out.candidate_params.resize(k_count);
+  out.pool.resize(k_count);
+  out.stash.resize(k_count);
+  out.usable.resize(k_count);
+  out.stash_offsets.assign(k_count, std::vector<uint32_t>{0});
+  out.brightest.assign(k_count, {});
+  out.kept.resize(k_count);
+  for (size_t k = 0; k < k_count; ++k) {
+    std::vector<uint32_t> own, evidenced;
+    for (uint32_t i : nodes[k].items) {
+      const uint32_t t = texel[i];
+      out.cluster_of[t] = int32_t(k);
+      if (HasOwnLobe(fits, t)) own.push_back(t);
+      if (HasOwnLobe(fits, t) || LobeAbsent(fits, t)) evidenced.push_back(t);
+    }
+    stats->clustered_texels += nodes[k].items.size();
+    // Candidates: the best-sampled own lobes (ties: lower texel first).
+    std::stable_sort(own.begin(), own.end(),
+                     [&](uint32_t x, uint32_t y) { return fits.samples(x) > fits.samples(y); });
+    own.resize(std::min(own.size(), size_t(kClusterLobeCandidates)));
+    out.candidates[k] = own;
+    for (uint32_t d : own) out.candidate_params[k].push_back(fits.Get(d).params);
+    if (own.empty()) continue;  // nothing to lend: no pool needed
+    // Pool: an even stride through the evidenced members (ascending texels).
+    const size_t n = evidenced.size(), want = std::min(n, size_t(options.pool_texels));
+    for (size_t i = 0; i < want; ++i) out.pool[k].push_back(evidenced[i * n / want]);
+    out.all_pool.insert(out.all_pool.end(), out.pool[k].begin(), out.pool[k].end());
+  }
+  std::sort(out.all_pool.begin(), out.all_pool.end());
+  stats->clusters = out.count;
+  return out;
+}
+
+void StashClusterSamples(const TexelSampleChunk& chunk, double min_cos_theta,
+                         MaterialClusters* clusters) {
+  const auto& pool = clusters->all_pool;
+  const uint64_t first = chunk.first_texel, end = first + chunk.texel_count;
+  const auto less = [](uint32_t t, uint64_t v) { return uint64_t(t) < v; };
+  const auto begin = std::lower_bound(pool.begin(), pool.end(), first, less);
+  const auto stop = std::lower_bound(pool.begin(), pool.end(), end, less);
+  for (auto it = begin; it != stop; ++it) {
+    const uint32_t t = *it;
+    const size_t k = size_t(clusters->cluster_of[t]);
+    const uint32_t i = uint32_t(t - first);
+    const size_t count = chunk.SampleCount(i);
+    const BrdfSample* samples = chunk.SamplesOf(i);
+    std::vector<size_t> ok;
+    std::vector<UsableSample> prepared(count);
+    for (size_t s = 0; s < count; ++s) {
+      prepared[s] = PrepareUsableSample(samples[s], min_cos_theta);
+      if (prepared[s].usable) ok.push_back(s);
+    }
+    const size_t keep = std::min(ok.size(), size_t(kMaxPooledSamplesPerTexel));
+    for (size_t j = 0; j < keep; ++j) {
+      const size_t s = ok[j * ok.size() / keep];
+      clusters->stash[k].push_back(samples[s]);
+      clusters->usable[k].push_back(prepared[s]);
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        const float w = samples[s].weight[c], y = samples[s].value[c];
+        if (w > 0 && std::isfinite(w) && std::isfinite(y)) {
+          clusters->brightest[k][c] = std::max(clusters->brightest[k][c], double(y));
+        }
+      }
+    }
+    clusters->stash_offsets[k].push_back(uint32_t(clusters->stash[k].size()));
+  }
+}
+
+namespace {
+
+// One pool texel's samples in one channel of the refinement: residuals
+// sqrt(w) (y - rho/pi - lobe(wi, wo)), the lobe (Cx, Cy, Cz, n) shared by the pool, rho the
+// texel's albedo; analytic Jacobians (brdf::EvalChannelWithGradient). `iso` ties Cy to Cx (the
+// lobe block's Cy is then unused: its Jacobian column is 0 and it stays at its start).
+class PooledTexelCost : public ceres::CostFunction {
+ public:
+  PooledTexelCost(std::vector<std::array<float, 8>> rows, bool iso) : rows_(std::move(rows)), iso_(iso) {
+    set_num_residuals(int(rows_.size()));
+    mutable_parameter_block_sizes()->push_back(4);
+    mutable_parameter_block_sizes()->push_back(1);
+  }
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double* lobe = parameters[0];
+    const double rho = parameters[1][0];
+    const double p[5] = {rho, lobe[0], iso_ ? lobe[0] : lobe[1], lobe[2], lobe[3]};
+    double grad[5];
+    for (size_t i = 0; i < rows_.size(); ++i) {
+      const auto& r = rows_[i];  // wi[3], wo[3], y, sqrt_w
+      const double wi[3] = {r[0], r[1], r[2]}, wo[3] = {r[3], r[4], r[5]};
+      const double f = brdf::EvalChannelWithGradient(wi, wo, p, 1, grad);
+      residuals[i] = double(r[7]) * (double(r[6]) - f);
+      if (jacobians && jacobians[0]) {
+        double* j = jacobians[0] + 4 * i;
+        j[0] = -double(r[7]) * (iso_ ? grad[1] + grad[2] : grad[1]);
+        j[1] = iso_ ? 0.0 : -double(r[7]) * grad[2];
+        j[2] = -double(r[7]) * grad[3];
+        j[3] = -double(r[7]) * grad[4];
+      }
+      if (jacobians && jacobians[1]) jacobians[1][i] = -double(r[7]) * grad[0];
+    }
+    return true;
+  }
+
+ private:
+  std::vector<std::array<float, 8>> rows_;
+  bool iso_;
+};
+
+// Refines `start`'s single lobe on cluster k's pool, channel by channel; false when a solve fails
+// or leaves a non-finite parameter.
+bool RefineClusterLobe(const MaterialClusters& clusters, size_t k, LobeModel model,
+                       const brdf::BrdfParams& start, brdf::BrdfParams* refined) {
+  *refined = start;
+  const auto& offsets = clusters.stash_offsets[k];
+  const auto& stash = clusters.stash[k];
+  const auto& usable = clusters.usable[k];
+  const size_t texels = offsets.size() - 1;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    const brdf::LobeParams& l = start.lobes[0][c];
+    double lobe[4] = {l.cx, model == LobeModel::kIso ? 0.5 * (double(l.cx) + l.cy) : l.cy, l.cz,
+                      std::clamp(double(l.n), brdf::kMinExponent, brdf::kMaxExponent)};
+    std::vector<double> rho(texels, 0.0);
+    // Start each texel's albedo at its re-fit under the start lobe.
+    for (size_t i = 0; i < texels; ++i) {
+      std::array<float, brdf::kChannels> r{};
+      RefitAlbedoCost(&stash[offsets[i]], offsets[i + 1] - offsets[i], &usable[offsets[i]], &start,
+                      &r);
+      rho[i] = r[c];
+    }
+    ceres::Problem problem;
+    size_t residuals = 0;
+    for (size_t i = 0; i < texels; ++i) {
+      std::vector<std::array<float, 8>> rows;
+      for (uint32_t s = offsets[i]; s < offsets[i + 1]; ++s) {
+        const float w = stash[s].weight[c], y = stash[s].value[c];
+        if (!(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
+        rows.push_back({usable[s].wi[0], usable[s].wi[1], usable[s].wi[2], usable[s].wo[0],
+                        usable[s].wo[1], usable[s].wo[2], y, std::sqrt(w)});
+      }
+      if (rows.empty()) continue;
+      residuals += rows.size();
+      problem.AddResidualBlock(new PooledTexelCost(std::move(rows), model == LobeModel::kIso),
+                               nullptr, lobe, &rho[i]);
+    }
+    if (residuals == 0) continue;  // nothing measured in this channel: the start stays
+    problem.SetParameterLowerBound(lobe, 3, brdf::kMinExponent);
+    problem.SetParameterUpperBound(lobe, 3, brdf::kMaxExponent);
+    for (size_t i = 0; i < texels; ++i) {
+      if (problem.HasParameterBlock(&rho[i])) problem.SetParameterLowerBound(&rho[i], 0, 0.0);
+    }
+    ceres::Solver::Options solver;
+    solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    // The albedos are independent given the lobe: the Schur complement eliminates them, leaving
+    // a 4x4 system per step.
+    solver.linear_solver_type = ceres::DENSE_SCHUR;
+    solver.max_num_iterations = 50;
+    solver.num_threads = 1;  // clusters run in parallel instead
+    solver.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(solver, &problem, &summary);
+    if (!summary.IsSolutionUsable()) return false;
+    for (double v : lobe) {
+      if (!std::isfinite(v)) return false;
+    }
+    brdf::LobeParams& out = refined->lobes[0][c];
+    out.cx = float(lobe[0]);
+    out.cy = float(model == LobeModel::kIso ? lobe[0] : lobe[1]);
+    out.cz = float(lobe[2]);
+    out.n = float(lobe[3]);
+  }
+  return true;
+}
+
+struct Score {
+  double cost = 0;
+  size_t contradicted = 0;
+};
+
+// A lobe's pooled cost and contradictions on cluster k's pool (albedos re-fitted per texel).
+Score ScoreOnPool(const MaterialClusters& clusters, size_t k, const brdf::BrdfParams& params,
+                  const std::vector<double>& lambert, double max_cost_increase) {
+  const auto& offsets = clusters.stash_offsets[k];
+  Score score;
+  std::array<float, brdf::kChannels> rho{};
+  for (size_t i = 0; i + 1 < offsets.size(); ++i) {
+    const double cost = RefitAlbedoCost(&clusters.stash[k][offsets[i]], offsets[i + 1] - offsets[i],
+                                        &clusters.usable[k][offsets[i]], &params, &rho);
+    if (!std::isfinite(cost)) return {std::numeric_limits<double>::infinity(), offsets.size()};
+    score.cost += cost;
+    score.contradicted += cost > lambert[i] + max_cost_increase;
+  }
+  return score;
+}
+
+}  // namespace
+
+void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
+                        MaterialClusterStats* stats) {
+  const double max_increase = options.lobe_transfer.max_cost_increase;
+  const bool refine = options.lobes == 1 && options.lobe_model != LobeModel::kShared;
+  std::vector<uint8_t> kept_any(size_t(clusters->count), 0), refined_kept(size_t(clusters->count), 0);
+  // One cluster per task: a refinement is one small Ceres solve per channel.
+  ParallelFor(0, clusters->count, 1, [&](int64_t begin, int64_t end, int) {
+    for (int64_t kk = begin; kk < end; ++kk) {
+      const size_t k = size_t(kk);
+      const auto& offsets = clusters->stash_offsets[k];
+      const size_t texels = offsets.size() - 1;
+      if (texels == 0 || clusters->candidate_params[k].empty()) continue;
+      std::vector<double> lambert(texels);
+      double lambert_total = 0;
+      std::array<float, brdf::kChannels> rho{};
+      for (size_t i = 0; i < texels; ++i) {
+        lambert[i] = RefitAlbedoCost(&clusters->stash[k][offsets[i]], offsets[i + 1] - offsets[i],
+                                     &clusters->usable[k][offsets[i]], nullptr, &rho);
+        lambert_total += lambert[i];
+      }
+      struct Scored {
+        double cost;
+        size_t index;  // candidates, then the refined lobe last
+        brdf::BrdfParams params;
+      };
+      std::vector<Scored> all;
+      for (size_t j = 0; j < clusters->candidate_params[k].size(); ++j) {
+        const Score s = ScoreOnPool(*clusters, k, clusters->candidate_params[k][j], lambert, max_increase);
+        all.push_back({s.cost, j, clusters->candidate_params[k][j]});
+        all.back().cost = s.contradicted > kMaxContradictedShare * double(texels)
+                              ? std::numeric_limits<double>::infinity()
+                              : s.cost;
+      }
+      const auto best = std::min_element(all.begin(), all.end(), [](const Scored& x, const Scored& y) {
+        return x.cost < y.cost || (x.cost == y.cost && x.index < y.index);
+      });
+      if (refine && std::isfinite(best->cost)) {
+        brdf::BrdfParams refined;
+        if (RefineClusterLobe(*clusters, k, options.lobe_model, best->params, &refined)) {
+          const Score s = ScoreOnPool(*clusters, k, refined, lambert, max_increase);
+          all.push_back({s.contradicted > kMaxContradictedShare * double(texels)
+                             ? std::numeric_limits<double>::infinity()
+                             : s.cost,
+                         clusters->candidate_params[k].size(), refined});
+        }
+      }
+      std::vector<Scored> ok;
+      for (const Scored& s : all) {
+        if (!std::isfinite(s.cost) || !(s.cost < lambert_total)) continue;
+        bool within = true;
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          within = within && LobeSupremum(s.params, c) <= kMaxLobeSupremum * clusters->brightest[k][c];
+        }
+        if (within) ok.push_back(s);
+      }
+      std::sort(ok.begin(), ok.end(), [](const Scored& x, const Scored& y) {
+        return x.cost < y.cost || (x.cost == y.cost && x.index < y.index);
+      });
+      ok.resize(std::min(ok.size(), size_t(options.clusters.lobes_per_cluster)));
+      for (const Scored& s : ok) {
+        clusters->kept[k].push_back(s.params);
+        if (s.index == clusters->candidate_params[k].size()) refined_kept[k] = 1;
+      }
+      kept_any[k] = !ok.empty();
+    }
+  }, options.threads);
+  for (int k = 0; k < clusters->count; ++k) {
+    stats->clusters_with_lobe += kept_any[size_t(k)];
+    stats->refined += refined_kept[size_t(k)];
+  }
+  clusters->stash = {};
+  clusters->usable = {};
+  clusters->stash_offsets = {};
+}
+
+void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, FitStore* fits, MaterialClusterStats* stats) {
+  const double max_increase = options.lobe_transfer.max_cost_increase;
+  const int own_params = NumParams(options.lobe_model, fits->lobes()) *
+                         ProblemsPerTexel(options.lobe_model);
+  std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
+  // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
+  ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
+    std::vector<UsableSample> usable;
+    for (int64_t i = begin; i < end; ++i) {
+      const size_t t = size_t(chunk.first_texel) + size_t(i);
+      const FitStatus status = fits->status(t);
+      if (fits->samples(t) < kMinTransferSamples || status == FitStatus::kNonFiniteInput) continue;
+      const bool lambert_only = fits->lambert_only(t);
+      const bool recipient = lambert_only && (status == FitStatus::kUnidentifiableLobe ||
+                                              status == FitStatus::kTooFewSamples);
+      recipients += recipient;
+      const int32_t k = clusters.cluster_of[t];
+      if (k < 0 || clusters.kept[size_t(k)].empty()) {
+        no_lobe += recipient;
+        continue;
+      }
+      const size_t count = chunk.SampleCount(uint32_t(i));
+      const BrdfSample* samples = chunk.SamplesOf(uint32_t(i));
+      usable.resize(count);
+      size_t residuals = 0;
+      for (size_t s = 0; s < count; ++s) {
+        usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
+        if (!usable[s].usable) continue;
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          residuals += samples[s].weight[c] > 0 && std::isfinite(samples[s].weight[c]) &&
+                       std::isfinite(samples[s].value[c]);
+        }
+      }
+      TexelFit fit = fits->Get(t);
+      std::array<float, brdf::kChannels> rho{};
+      const double own_cost =
+          RefitAlbedoCost(samples, count, usable.data(), lambert_only ? nullptr : &fit.params, &rho);
+      // What the cluster lobe must beat: a Lambert-only texel's cost plus the allowed increase
+      // (its samples do not contradict the lobe); a texel with a lobe, its BIC.
+      const double k_own = fits->borrowed(t) ? 3.0 : double(own_params);
+      const double bar = lambert_only ? own_cost + max_increase
+                                      : own_cost - 0.5 * (k_own - 3.0) *
+                                                       std::log(double(std::max<size_t>(residuals, 1)));
+      double best_cost = std::numeric_limits<double>::infinity();
+      const brdf::BrdfParams* best = nullptr;
+      std::array<float, brdf::kChannels> best_rho{};
+      for (const brdf::BrdfParams& lobe : clusters.kept[size_t(k)]) {
+        const double cost = RefitAlbedoCost(samples, count, usable.data(), &lobe, &rho);
+        if (std::isfinite(cost) && cost < best_cost) {
+          best_cost = cost;
+          best = &lobe;
+          best_rho = rho;
+        }
+      }
+      const bool take = best != nullptr && (lambert_only ? best_cost <= bar : best_cost < bar);
+      if (!take) {
+        rejected += recipient;
+        continue;
+      }
+      fit.params.lobes = best->lobes;
+      fit.params.rho_d = best_rho;
+      fit.cost = float(best_cost);
+      fit.lambert_only = false;
+      fits->Set(t, fit);
+      fits->set_donor(t, FitStore::kClusterLobe);
+      (lambert_only ? transferred : replaced) += 1;
+    }
+  }, options.threads);
+  stats->recipients += recipients;
+  stats->no_lobe += no_lobe;
+  stats->rejected += rejected;
+  stats->transferred += transferred;
+  stats->replaced += replaced;
+}
+
+}  // namespace reflcap::fit

@@ -1,0 +1,130 @@
+#pragma once
+// Material clusters: the lobe a material showed anywhere, for its texels that did not see it or
+// saw too little of it (after Lensch et al. 2003, "Image-based reconstruction of spatial
+// appearance and geometric detail": cluster the texels, fit each cluster's BRDF to the pooled
+// samples of its texels, then choose per texel).
+//
+// Why: lobe transfer (lobe_transfer.h) lends a texel one neighbour's lobe and holds it to the
+// texel's own evidence — its supremum may be at most 10x the brightest sample *that texel*
+// showed. A texel without highlight evidence has only dim samples, so a real highlight lobe fails
+// that bound (`synth --preset small --seed 11`: 6,048 of 11,162 recipients rejected by it at a
+// 60-texel radius), and dropping the bound for single neighbours lets wrong lobes through (a
+// 3-camera x 24-step synth rig fell from 40.3 to 19.8 dB holdout PSNR). A cluster supplies the
+// missing evidence: a lobe is lent only when it explains the pooled samples of its material.
+//
+//   1. Clusters (BuildMaterialClusters). Every texel with at least kMinTransferSamples samples is
+//      placed in albedo space: chromaticity (rho_R, rho_G) / (rho_R + rho_G + rho_B) in units of
+//      `chroma_scale` and ln(rho_R + rho_G + rho_B) in units of `level_scale`. Bisecting 2-means
+//      (split along the principal axis, then Lloyd iterations) splits the cluster with the largest
+//      spread while its mean squared spread exceeds 1 unit^2 and both halves keep
+//      `min_cluster_texels`, up to `max_clusters`. Deterministic: no random start.
+//   2. Pool (StashClusterSamples, one pass over the chunks). Up to `pool_texels` evidenced members
+//      per cluster — texels that fitted a lobe of their own, or saw their mirror configuration and
+//      showed none ("lobe absent") — in an even stride; their usable samples (at most
+//      kMaxPooledSamplesPerTexel each, an even stride) are kept, and the brightest per channel.
+//   3. Lobes (ChooseClusterLobes). Candidates: the lobes of up to kClusterLobeCandidates members
+//      that fitted one of their own (most samples first), and — one lobe, anisotropic or
+//      isotropic model — the best of them refined by Levenberg-Marquardt (Ceres) on the whole
+//      pool, one lobe per channel shared by all pool texels, each texel with its own albedo. Each
+//      candidate is scored on the pool with every texel's albedo re-fitted under it (as lobe
+//      transfer does): pooled cost, and how many pool texels it contradicts (cost above their
+//      Lambert-only cost by more than max_cost_increase). Kept, best pooled cost first, up to
+//      `lobes_per_cluster`: lobes that lower the pooled cost below Lambert-only, that at most
+//      kMaxContradictedShare of the pool contradicts (a cluster mixing a matte and a glossy
+//      material of one albedo lends nothing), and whose supremum stays within 10x the pool's
+//      brightest sample per channel (problem.h kMaxLobeSupremum, on the material's evidence).
+//   4. Per texel (ApplyClusterLobes, one pass over the chunks). Every clustered texel with at
+//      least kMinTransferSamples samples whose cluster kept lobes compares, on its own samples,
+//      its fit with each kept lobe (albedo re-fitted):
+//        - a Lambert-only texel (kUnidentifiableLobe, kTooFewSamples, or lobe absent) takes the
+//          lowest-cost lobe that costs at most max_cost_increase more than its Lambert fit: its
+//          samples do not contradict it (lobe transfer's test);
+//        - a texel with a lobe (its own, or a neighbour's) takes the cluster lobe when the
+//          Bayesian information criterion prefers it: 2 cost + k ln N, k = 3 for the cluster lobe
+//          (the albedo only) and the texel's own parameter count for its fit (3 for a borrowed
+//          lobe), N its residuals — a texel's own lobe stays only where its samples pay for the
+//          parameters it spent on it. This is the cluster lobe as a prior: where the texel saw
+//          too little of its highlight to pin the lobe, the material's lobe predicts better.
+//      A texel that takes a cluster lobe gets donor FitStore::kClusterLobe, its sigmas unknown
+//      (-1), and keeps its status (the lobe is the material's, not measured by the texel alone).
+//
+// Runs after the fit on every backend alike (it reads the FitStore and the sample store, nothing
+// of the fitter), so CPU and Vulkan fits take the same lobes given the same fits.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "engine/brdf/lafortune.h"
+#include "engine/fit/fit_store.h"
+#include "engine/fit/fitter.h"
+#include "engine/fit/lobe_transfer.h"
+#include "engine/fit/model.h"
+#include "engine/texel/samples.h"
+
+namespace reflcap::fit {
+
+// Own lobes tried per cluster: enough to find the material's lobe among its best-sampled texels;
+// each costs one lobe evaluation per pooled sample.
+constexpr int kClusterLobeCandidates = 8;
+// A kept lobe may raise the cost of at most this share of the pool's texels above their
+// Lambert-only cost (by more than max_cost_increase): a few texels of another material or with a
+// poor fit are tolerated, a matte half of the cluster is not.
+constexpr double kMaxContradictedShare = 0.2;
+// Samples kept per pool texel (an even stride through its usable ones): 256 texels x 128
+// samples bound a cluster's pool at ~1.7 MB, and a lobe's few parameters are decided many times
+// over.
+constexpr int kMaxPooledSamplesPerTexel = 64;
+
+struct MaterialClusterStats {
+  int clusters = 0;             // clusters formed
+  int clusters_with_lobe = 0;   // clusters that kept at least one lobe
+  int refined = 0;              // clusters whose kept lobes include the pooled LM fit
+  size_t clustered_texels = 0;  // texels with a cluster
+  size_t recipients = 0;        // Lambert-only texels that could take a lobe
+  size_t no_lobe = 0;           // recipients without a cluster, or whose cluster kept no lobe
+  size_t rejected = 0;          // recipients whose samples contradict every kept lobe
+  size_t transferred = 0;       // recipients that took a cluster lobe
+  size_t replaced = 0;          // texels with a lobe that took the cluster's instead (criterion)
+};
+
+struct MaterialClusters {
+  int count = 0;
+  std::vector<int32_t> cluster_of;  // per texel: its cluster, -1 for none
+
+  // Per cluster.
+  std::vector<std::vector<uint32_t>> candidates;  // donor texels of the candidate lobes
+  std::vector<std::vector<brdf::BrdfParams>> candidate_params;
+  std::vector<std::vector<uint32_t>> pool;        // pool texels, ascending
+  std::vector<std::vector<BrdfSample>> stash;     // their kept samples, pool order
+  std::vector<std::vector<UsableSample>> usable;  // the same, prepared
+  std::vector<std::vector<uint32_t>> stash_offsets;  // pool.size() + 1
+  std::vector<std::array<double, brdf::kChannels>> brightest;  // over the pool's samples
+  std::vector<std::vector<brdf::BrdfParams>> kept;  // step 3's lobes, best first
+
+  std::vector<uint32_t> all_pool;  // every cluster's pool texels, ascending
+
+  // True when some pool texel of some cluster lies in texels [first, end).
+  bool PoolIn(uint64_t first, uint64_t end) const;
+  // True when some texel in [first, end) belongs to a cluster that kept a lobe.
+  bool KeptIn(uint64_t first, uint64_t end) const;
+};
+
+// Step 1 (and the candidates of step 3). Empty (count 0) when options.enabled is false or the
+// fit has no lobes.
+MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClusterOptions& options,
+                                       MaterialClusterStats* stats);
+
+// Step 2 for the pool texels of one chunk. Chunks must come in ascending order (each pool's
+// samples are appended in texel order).
+void StashClusterSamples(const TexelSampleChunk& chunk, double min_cos_theta,
+                         MaterialClusters* clusters);
+
+// Step 3, once every chunk is stashed; frees the stash.
+void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
+                        MaterialClusterStats* stats);
+
+// Step 4 for the texels of one chunk.
+void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, FitStore* fits, MaterialClusterStats* stats);
+
+}  // namespace reflcap::fit

@@ -1,0 +1,257 @@
+// Material clusters (engine/fit/material_clusters.h): which texels form a material, which lobe
+// the material's pooled samples choose, and which texels take it. Fits are set by hand, samples
+// rendered from known BRDFs, all texels in one chunk.
+#include "engine/fit/material_clusters.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "engine/brdf/lafortune.h"
+#include "engine/fit/fit_store.h"
+#include "tests/engine/fit/fit_test_util.h"
+#include "tests/engine/fit/transfer_fixtures.h"
+
+namespace reflcap::fit {
+namespace {
+
+using testing::Chunk;
+using testing::Direction;
+using testing::DonorFit;
+using testing::Glossy;
+using testing::RecipientFit;
+using testing::Samples;
+using testing::StoreOf;
+
+// Samples of `truth` around its highlight, as a texel that saw it: wi at 20..65 degrees, wo at the
+// same elevation, azimuth 180 + offsets of -12..12 degrees (the n = 40 lobe falls to ~1/4 of its
+// peak at 12 degrees off the mirror direction) and some far from it. Exact values, sigma 0.01 / sr.
+std::vector<BrdfSample> HighlightSamples(const brdf::BrdfParams& truth, int texel) {
+  std::vector<BrdfSample> out;
+  for (int i = 0; i < 40; ++i) {
+    const double theta = 20 + 5 * ((i + texel) % 10);
+    const double phi = i < 30 ? 180 - 12 + 0.8 * ((i * 7 + texel) % 31) : 60 + 7 * (i - 30);
+    out.push_back(testing::ExactSample(truth, Direction(theta, 0), Direction(theta, phi)));
+  }
+  return out;
+}
+
+brdf::BrdfParams Matte(const std::array<float, 3>& rho) {
+  brdf::BrdfParams p;
+  p.num_lobes = 1;
+  p.rho_d = rho;
+  for (int c = 0; c < brdf::kChannels; ++c) p.lobes[0][c] = {0, 0, 0, 20};
+  return p;
+}
+
+// A texel that saw its mirror configuration and showed no lobe: kConverged, Lambert-only.
+TexelFit LobeAbsentFit(const std::array<float, 3>& rho) {
+  TexelFit f = RecipientFit(rho);
+  f.status = FitStatus::kConverged;
+  f.samples = 40;
+  return f;
+}
+
+// Runs the three steps on one chunk holding every texel.
+MaterialClusterStats RunClusters(const TexelSampleChunk& chunk, FitStore* store, int threads = 1,
+                                 MaterialClusters* out = nullptr) {
+  FitOptions options;
+  options.threads = threads;
+  MaterialClusterStats stats;
+  MaterialClusters clusters = BuildMaterialClusters(*store, options.clusters, &stats);
+  StashClusterSamples(chunk, options.min_cos_theta, &clusters);
+  ChooseClusterLobes(options, &clusters, &stats);
+  ApplyClusterLobes(chunk, clusters, options, store, &stats);
+  if (out) *out = std::move(clusters);
+  return stats;
+}
+
+const std::array<float, 3> kGlossyAlbedo = {0.4f, 0.3f, 0.2f};
+const std::array<float, 3> kMatteAlbedo = {0.2f, 0.5f, 0.6f};
+
+TEST(MaterialClusters, AGlossyMaterialLendsItsLobeAndAMatteOneNothing) {
+  // Texels 0..39 glossy donors, 40..99 glossy texels that never saw the highlight, 100..139
+  // matte texels that saw their mirror configuration, 140..199 matte texels that did not.
+  const brdf::BrdfParams glossy = Glossy();
+  const brdf::BrdfParams matte = Matte(kMatteAlbedo);
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 200; ++t) {
+    if (t < 40) {
+      fits.push_back(DonorFit(glossy));
+      samples.push_back(HighlightSamples(glossy, t));
+    } else if (t < 100) {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(glossy, false));
+    } else if (t < 140) {
+      fits.push_back(LobeAbsentFit(kMatteAlbedo));
+      samples.push_back(HighlightSamples(matte, t));
+    } else {
+      fits.push_back(RecipientFit(kMatteAlbedo));
+      samples.push_back(Samples(matte, false));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  MaterialClusters clusters;
+  const MaterialClusterStats stats = RunClusters(chunk, &store, 1, &clusters);
+  // Two albedos, each exact: two clusters, no spread left to split.
+  EXPECT_EQ(stats.clusters, 2);
+  EXPECT_EQ(stats.clustered_texels, 200u);
+  EXPECT_EQ(clusters.cluster_of[0], clusters.cluster_of[99]);
+  EXPECT_EQ(clusters.cluster_of[100], clusters.cluster_of[199]);
+  EXPECT_NE(clusters.cluster_of[0], clusters.cluster_of[100]);
+  EXPECT_EQ(stats.clusters_with_lobe, 1);
+  EXPECT_EQ(stats.recipients, 120u);
+  EXPECT_EQ(stats.transferred, 60u);  // every glossy texel that missed its highlight
+  EXPECT_EQ(stats.no_lobe, 60u);      // the matte cluster has no lobe to lend
+  for (size_t t = 40; t < 100; ++t) {
+    EXPECT_EQ(store.donor(t), FitStore::kClusterLobe) << t;
+    const TexelFit f = store.Get(t);
+    EXPECT_FALSE(f.lambert_only);
+    EXPECT_EQ(f.status, FitStatus::kUnidentifiableLobe);  // the material's lobe, not measured
+    // Exact samples and exact donors: the lobe is the truth's to the refinement's tolerance
+    // (1e-5 relative steps) and the albedo re-fit's float sums (1e-4 relative).
+    EXPECT_NEAR(f.params.lobes[0][0].n, glossy.lobes[0][0].n, 1e-3 * glossy.lobes[0][0].n);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(f.params.rho_d[c], glossy.rho_d[c], 1e-3);
+  }
+  for (size_t t = 100; t < 200; ++t) {
+    EXPECT_EQ(store.donor(t), FitStore::kNoDonor) << t;
+    EXPECT_TRUE(store.lambert_only(t)) << t;
+  }
+  // The donors keep their own (exact) lobes: the cluster's cannot beat them by the criterion.
+  for (size_t t = 0; t < 40; ++t) EXPECT_EQ(store.donor(t), FitStore::kNoDonor) << t;
+}
+
+TEST(MaterialClusters, ThePooledFitRecoversTheLobeNoDonorGotRight) {
+  // Every donor's own fit is off in n by up to +-25 % (too few samples near the peak, say); the
+  // samples are the truth's. The refinement on the pooled samples finds n = 40 again, and the
+  // texels that never saw the highlight get that lobe, not a donor's.
+  const brdf::BrdfParams truth = Glossy();
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 100; ++t) {
+    if (t < 40) {
+      brdf::BrdfParams off = truth;
+      const double n = 40 * (0.75 + 0.5 * (t % 9) / 8.0 + (t % 9 == 4 ? 0.05 : 0.0));
+      for (int c = 0; c < 3; ++c) off.lobes[0][c] = brdf::MirrorLobe(0.5, n);
+      fits.push_back(DonorFit(off));
+      samples.push_back(HighlightSamples(truth, t));
+    } else {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(truth, false));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  const MaterialClusterStats stats = RunClusters(chunk, &store);
+  EXPECT_EQ(stats.refined, 1);
+  EXPECT_EQ(stats.transferred, 60u);
+  // Exact pooled samples: the refined n within 0.1 % of the truth; the best donor is >= 5 % off.
+  EXPECT_NEAR(store.Get(50).params.lobes[0][0].n, 40.0, 0.04);
+  // The donors whose own n is off by 25 % or 19 % (t % 9 in {0, 1, 7, 8}) take the material's
+  // lobe by the information criterion; those within 6 % (t % 9 in {3, 4, 5}) keep their own:
+  // with 120 residuals the criterion lets 12 more parameters buy a cost drop of 6 ln 120 = 29.
+  EXPECT_EQ(stats.replaced, 18u);
+  for (size_t t = 0; t < 40; ++t) {
+    const int level = int(t % 9);
+    if (level <= 1 || level >= 7) {
+      EXPECT_EQ(store.donor(t), FitStore::kClusterLobe) << t;
+    }
+    if (level >= 3 && level <= 5) {
+      EXPECT_EQ(store.donor(t), FitStore::kNoDonor) << t;
+    }
+  }
+}
+
+TEST(MaterialClusters, AClusterWhoseSamplesContradictTheLobeLendsNothing) {
+  // One albedo, two materials: 30 glossy donors and 90 matte texels that saw their mirror
+  // configuration (lobe absent). Any glossy lobe contradicts three quarters of the pool: the
+  // matte recipients must not get it.
+  const brdf::BrdfParams glossy = Glossy();
+  const brdf::BrdfParams matte = Matte(kGlossyAlbedo);
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 160; ++t) {
+    if (t < 30) {
+      fits.push_back(DonorFit(glossy));
+      samples.push_back(HighlightSamples(glossy, t));
+    } else if (t < 120) {
+      fits.push_back(LobeAbsentFit(kGlossyAlbedo));
+      samples.push_back(HighlightSamples(matte, t));
+    } else {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(matte, false));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  const MaterialClusterStats stats = RunClusters(chunk, &store);
+  EXPECT_EQ(stats.clusters, 1);
+  EXPECT_EQ(stats.clusters_with_lobe, 0);
+  EXPECT_EQ(stats.transferred, 0u);
+  EXPECT_EQ(stats.no_lobe, 40u);
+  for (size_t t = 30; t < 160; ++t) EXPECT_TRUE(store.lambert_only(t)) << t;
+}
+
+TEST(MaterialClusters, ATexelWhoseSamplesShowAnotherLobeKeepsItsOwn) {
+  // 60 texels of the material, 40 of them donors; texel 59 is a donor whose samples show a much
+  // sharper lobe (n = 200) and whose own fit has it: the material's lobe costs it far more than
+  // the criterion allows, so it keeps its own. The same for the threads: 1 and 2 agree exactly.
+  const brdf::BrdfParams truth = Glossy();
+  brdf::BrdfParams sharp = truth;
+  for (int c = 0; c < 3; ++c) sharp.lobes[0][c] = brdf::MirrorLobe(0.5, 200);
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 60; ++t) {
+    const bool odd = t == 59;
+    if (t < 40 || odd) {
+      fits.push_back(DonorFit(odd ? sharp : truth));
+      samples.push_back(HighlightSamples(odd ? sharp : truth, t));
+    } else {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(truth, false));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore one = StoreOf(fits), two = StoreOf(fits);
+  RunClusters(chunk, &one, 1);
+  RunClusters(chunk, &two, 2);
+  EXPECT_EQ(one.donor(59), FitStore::kNoDonor);
+  EXPECT_EQ(one.Get(59).params.lobes[0][0].n, 200.0f);
+  EXPECT_EQ(one.donor(45), FitStore::kClusterLobe);
+  for (size_t t = 0; t < 60; ++t) {
+    for (int i = 0; i < one.ParamsPerTexel(); ++i) {
+      ASSERT_EQ(one.params(t)[i], two.params(t)[i]) << t << " " << i;
+    }
+    EXPECT_EQ(one.donor(t), two.donor(t));
+  }
+}
+
+TEST(MaterialClusters, DisabledOrLambertOnlyFitsDoNothingAndOptionsAreChecked) {
+  std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit(kGlossyAlbedo)};
+  const FitStore store = StoreOf(fits);
+  MaterialClusterOptions options;
+  options.enabled = false;
+  MaterialClusterStats stats;
+  const MaterialClusters off = BuildMaterialClusters(store, options, &stats);
+  EXPECT_EQ(off.count, 0);
+  EXPECT_EQ(off.cluster_of, (std::vector<int32_t>{-1, -1}));
+  FitStore lambert(2, 0);
+  options.enabled = true;
+  EXPECT_EQ(BuildMaterialClusters(lambert, options, &stats).count, 0);
+  EXPECT_TRUE(options.Validate().ok());
+  options.chroma_scale = 0;
+  EXPECT_FALSE(options.Validate().ok());
+  options.chroma_scale = 0.02;
+  options.lobes_per_cluster = kClusterLobeCandidates + 1;
+  EXPECT_FALSE(options.Validate().ok());
+  options.lobes_per_cluster = 3;
+  options.max_clusters = 0;
+  EXPECT_FALSE(options.Validate().ok());
+}
+
+}  // namespace
+}  // namespace reflcap::fit
