@@ -347,11 +347,18 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const double transfer_seconds = Seconds(transfer_start);
   const double transfer_chunk_read_seconds = transfer_read_seconds;
   const double transfer_chunk_test_seconds = transfer_test_seconds;
+  // Albedo fill (albedo_fill.h): texels no train photograph lit and saw. Before the clusters,
+  // which give a filled texel its material's lobe.
+  const auto fill_start = std::chrono::steady_clock::now();
+  std::vector<uint8_t> albedo_filled;
+  const AlbedoFillStats fill = FillUnseenAlbedo(atlas, options.albedo_fill, &fits, &albedo_filled);
+  const double fill_seconds = Seconds(fill_start);
   // Material clusters (material_clusters.h): the texels still without a lobe take one that the
   // pooled samples of their material support.
   const auto cluster_start = std::chrono::steady_clock::now();
   MaterialClusterStats cluster_stats;
   MaterialClusters clusters = BuildMaterialClusters(fits, options.clusters, &cluster_stats);
+  AssignSparseTexels(fits, albedo_filled, options.clusters, &clusters, &cluster_stats);
   if (clusters.count > 0) {
     REFLCAP_RETURN_IF_ERROR(visit_chunks(
         [&](uint64_t first, uint64_t end) { return clusters.PoolIn(first, end); },
@@ -368,11 +375,6 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const double cluster_seconds = Seconds(cluster_start);
   cached = {};  // the kept chunks are not needed past the transfer
 
-  // Albedo fill (albedo_fill.h): texels no train photograph lit and saw.
-  const auto fill_start = std::chrono::steady_clock::now();
-  std::vector<uint8_t> albedo_filled;
-  const AlbedoFillStats fill = FillUnseenAlbedo(atlas, options.albedo_fill, &fits, &albedo_filled);
-  const double fill_seconds = Seconds(fill_start);
 
   const auto write_start = std::chrono::steady_clock::now();
   ReleaseFreeHeap();
@@ -470,7 +472,9 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         {"no_lobe", cluster_stats.no_lobe},
         {"rejected", cluster_stats.rejected},
         {"transferred", cluster_stats.transferred},
-        {"replaced", cluster_stats.replaced}}},
+        {"replaced", cluster_stats.replaced},
+        {"sparse_assigned", cluster_stats.sparse_assigned},
+        {"sparse_lent", cluster_stats.sparse_lent}}},
       {"albedo_fill", {{"unseen", fill.unseen}, {"filled", fill.filled}, {"rounds", fill.rounds}}},
       {"cost_percentiles", Percentiles(std::move(costs))},
       {"reduced_chi2_percentiles", Percentiles(std::move(chi2))},

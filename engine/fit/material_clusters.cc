@@ -194,6 +194,13 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
   out.stash_offsets.assign(k_count, std::vector<uint32_t>{0});
   out.brightest.assign(k_count, {});
   out.kept.resize(k_count);
+  out.centroid.assign(k_count, {0, 0, 0});
+  for (size_t k = 0; k < k_count; ++k) {
+    Feature mean = Feature::Zero();
+    for (uint32_t i : nodes[k].items) mean += f[i];
+    mean /= double(nodes[k].items.size());
+    out.centroid[k] = {mean[0], mean[1], mean[2]};
+  }
   for (size_t k = 0; k < k_count; ++k) {
     std::vector<uint32_t> own, evidenced;
     for (uint32_t i : nodes[k].items) {
@@ -218,6 +225,35 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
   std::sort(out.all_pool.begin(), out.all_pool.end());
   stats->clusters = out.count;
   return out;
+}
+
+void AssignSparseTexels(const FitStore& fits, const std::vector<uint8_t>& albedo_filled,
+                        const MaterialClusterOptions& options, MaterialClusters* clusters,
+                        MaterialClusterStats* stats) {
+  if (clusters->count == 0) return;
+  REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits.size());
+  for (size_t t = 0; t < fits.size(); ++t) {
+    const int samples = fits.samples(t);
+    const bool filled = !albedo_filled.empty() && albedo_filled[t];
+    if (clusters->cluster_of[t] >= 0 || samples >= kMinTransferSamples ||
+        (samples == 0 && !filled)) {
+      continue;
+    }
+    const Feature x = AlbedoFeature(fits.params(t), options);
+    int best = -1;
+    double best_d2 = kSparseAssignRadius * kSparseAssignRadius;
+    for (int k = 0; k < clusters->count; ++k) {
+      const auto& c = clusters->centroid[size_t(k)];
+      const double d2 = (x - Feature(c[0], c[1], c[2])).squaredNorm();
+      if (d2 <= best_d2) {
+        best_d2 = d2;
+        best = k;
+      }
+    }
+    if (best < 0) continue;
+    clusters->cluster_of[t] = best;
+    ++stats->sparse_assigned;
+  }
 }
 
 void StashClusterSamples(const TexelSampleChunk& chunk, double min_cos_theta,
@@ -465,18 +501,33 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   const int own_params = NumParams(options.lobe_model, fits->lobes()) *
                          ProblemsPerTexel(options.lobe_model);
   std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
+  std::atomic<size_t> sparse_lent{0};
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
     std::vector<UsableSample> usable;
     for (int64_t i = begin; i < end; ++i) {
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
-      if (fits->samples(t) < kMinTransferSamples || status == FitStatus::kNonFiniteInput) continue;
-      const bool lambert_only = fits->lambert_only(t);
-      const bool recipient = lambert_only && (status == FitStatus::kUnidentifiableLobe ||
-                                              status == FitStatus::kTooFewSamples);
-      recipients += recipient;
       const int32_t k = clusters.cluster_of[t];
+      if (status == FitStatus::kNonFiniteInput || fits->donor(t) == FitStore::kClusterLobe) continue;
+      const bool sparse = fits->samples(t) < kMinTransferSamples;
+      if (sparse) {
+        // Step 1b's texels: only those AssignSparseTexels placed, and only if still Lambert-only.
+        if (k < 0 || clusters.kept[size_t(k)].empty() || !fits->lambert_only(t)) continue;
+        if (fits->samples(t) == 0) {
+          TexelFit fit = fits->Get(t);
+          fit.params.lobes = clusters.kept[size_t(k)].front().lobes;
+          fit.lambert_only = false;
+          fits->Set(t, fit);
+          fits->set_donor(t, FitStore::kClusterLobe);
+          ++sparse_lent;
+          continue;
+        }
+      }
+      const bool lambert_only = fits->lambert_only(t);
+      const bool recipient = !sparse && lambert_only && (status == FitStatus::kUnidentifiableLobe ||
+                                                         status == FitStatus::kTooFewSamples);
+      recipients += recipient;
       if (k < 0 || clusters.kept[size_t(k)].empty()) {
         no_lobe += recipient;
         continue;
@@ -525,7 +576,11 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       fit.lambert_only = false;
       fits->Set(t, fit);
       fits->set_donor(t, FitStore::kClusterLobe);
-      (lambert_only ? transferred : replaced) += 1;
+      if (sparse) {
+        ++sparse_lent;
+      } else {
+        (lambert_only ? transferred : replaced) += 1;
+      }
     }
   }, options.threads);
   stats->recipients += recipients;
@@ -533,6 +588,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   stats->rejected += rejected;
   stats->transferred += transferred;
   stats->replaced += replaced;
+  stats->sparse_lent += sparse_lent;
 }
 
 }  // namespace reflcap::fit

@@ -45,6 +45,8 @@
 //          lobe), N its residuals — a texel's own lobe stays only where its samples pay for the
 //          parameters it spent on it. This is the cluster lobe as a prior: where the texel saw
 //          too little of its highlight to pin the lobe, the material's lobe predicts better.
+//      A texel without samples (albedo filled, step 1b) takes the cluster's best lobe untested:
+//      nothing it saw can contradict it, and its material's highlight is the best prediction.
 //      A texel that takes a cluster lobe gets donor FitStore::kClusterLobe, its sigmas unknown
 //      (-1), and keeps its status (the lobe is the material's, not measured by the texel alone).
 //
@@ -74,6 +76,9 @@ constexpr double kMaxContradictedShare = 0.2;
 // samples bound a cluster's pool at ~1.7 MB, and a lobe's few parameters are decided many times
 // over.
 constexpr int kMaxPooledSamplesPerTexel = 64;
+// A sparse texel joins a cluster only within this distance of its centroid (albedo-space units:
+// 3 = three times the spread at which a cluster is split, so well inside a material's range).
+constexpr double kSparseAssignRadius = 3.0;
 
 struct MaterialClusterStats {
   int clusters = 0;             // clusters formed
@@ -85,6 +90,8 @@ struct MaterialClusterStats {
   size_t rejected = 0;          // recipients whose samples contradict every kept lobe
   size_t transferred = 0;       // recipients that took a cluster lobe
   size_t replaced = 0;          // texels with a lobe that took the cluster's instead (criterion)
+  size_t sparse_assigned = 0;   // texels with 1-2 samples or a filled albedo given a cluster
+  size_t sparse_lent = 0;       // of those, texels that took its lobe
 };
 
 struct MaterialClusters {
@@ -100,6 +107,7 @@ struct MaterialClusters {
   std::vector<std::vector<uint32_t>> stash_offsets;  // pool.size() + 1
   std::vector<std::array<double, brdf::kChannels>> brightest;  // over the pool's samples
   std::vector<std::vector<brdf::BrdfParams>> kept;  // step 3's lobes, best first
+  std::vector<std::array<double, 3>> centroid;       // albedo-space mean of its texels (step 1)
 
   std::vector<uint32_t> all_pool;  // every cluster's pool texels, ascending
 
@@ -113,6 +121,14 @@ struct MaterialClusters {
 // fit has no lobes.
 MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClusterOptions& options,
                                        MaterialClusterStats* stats);
+
+// Step 1b: texels too sparse to form clusters — 1 or 2 samples, or none but an albedo from albedo
+// fill (`albedo_filled`, one byte per texel, or empty) — join the cluster whose centroid is
+// nearest to their albedo when it lies within kSparseAssignRadius units; step 4 then gives them
+// its lobe (tested on their samples when they have any).
+void AssignSparseTexels(const FitStore& fits, const std::vector<uint8_t>& albedo_filled,
+                        const MaterialClusterOptions& options, MaterialClusters* clusters,
+                        MaterialClusterStats* stats);
 
 // Step 2 for the pool texels of one chunk. Chunks must come in ascending order (each pool's
 // samples are appended in texel order).

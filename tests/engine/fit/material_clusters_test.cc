@@ -230,6 +230,57 @@ TEST(MaterialClusters, ATexelWhoseSamplesShowAnotherLobeKeepsItsOwn) {
   }
 }
 
+TEST(MaterialClusters, SparseTexelsJoinTheNearestMaterialWithinReach) {
+  // 40 glossy donors and 40 texels that missed the highlight form the material. Texel 80 has one
+  // sample (no highlight) and the material's albedo; texel 81 no sample but a filled albedo of the
+  // material; texel 82 no sample and a filled albedo of another colour (beyond
+  // kSparseAssignRadius); texel 83 no sample and no fill (albedo 0: nothing known).
+  const brdf::BrdfParams glossy = Glossy();
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 84; ++t) {
+    if (t < 40) {
+      fits.push_back(DonorFit(glossy));
+      samples.push_back(HighlightSamples(glossy, t));
+    } else if (t < 80) {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(glossy, false));
+    } else {
+      TexelFit f = RecipientFit(t == 82 ? kMatteAlbedo : t == 83 ? std::array<float, 3>{0, 0, 0}
+                                                                   : kGlossyAlbedo);
+      f.status = FitStatus::kTooFewSamples;
+      f.samples = t == 80 ? 1 : 0;
+      fits.push_back(f);
+      samples.push_back(t == 80 ? std::vector<BrdfSample>{Samples(glossy, false)[3]}
+                                : std::vector<BrdfSample>{});
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  FitOptions options;
+  MaterialClusterStats stats;
+  MaterialClusters clusters = BuildMaterialClusters(store, options.clusters, &stats);
+  std::vector<uint8_t> filled(84, 0);
+  filled[81] = filled[82] = 1;  // texel 83 was not filled
+  AssignSparseTexels(store, filled, options.clusters, &clusters, &stats);
+  EXPECT_EQ(stats.sparse_assigned, 2u);  // 80 and 81
+  EXPECT_EQ(clusters.cluster_of[80], clusters.cluster_of[0]);
+  EXPECT_EQ(clusters.cluster_of[81], clusters.cluster_of[0]);
+  EXPECT_EQ(clusters.cluster_of[82], -1);
+  EXPECT_EQ(clusters.cluster_of[83], -1);
+  StashClusterSamples(chunk, options.min_cos_theta, &clusters);
+  ChooseClusterLobes(options, &clusters, &stats);
+  ApplyClusterLobes(chunk, clusters, options, &store, &stats);
+  EXPECT_EQ(stats.sparse_lent, 2u);
+  EXPECT_EQ(store.donor(80), FitStore::kClusterLobe);
+  EXPECT_EQ(store.donor(81), FitStore::kClusterLobe);
+  // The unseen texel keeps its filled albedo (nothing to re-fit it on) under the material's lobe.
+  EXPECT_EQ(store.Get(81).params.rho_d, kGlossyAlbedo);
+  EXPECT_NEAR(store.Get(81).params.lobes[0][1].n, glossy.lobes[0][1].n, 1e-3 * glossy.lobes[0][1].n);
+  EXPECT_TRUE(store.lambert_only(82));
+  EXPECT_TRUE(store.lambert_only(83));
+}
+
 TEST(MaterialClusters, DisabledOrLambertOnlyFitsDoNothingAndOptionsAreChecked) {
   std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit(kGlossyAlbedo)};
   const FitStore store = StoreOf(fits);
