@@ -87,6 +87,19 @@ void ReleaseFreeHeap() {
 
 }  // namespace
 
+const char* const kTexelModelNames[kTexelModelCount] = {
+    "lambert_lobe_absent", "lambert_no_evidence", "own_lobe", "neighbour_lobe", "cluster_lobe",
+    "no_samples"};
+
+TexelModel TexelModelOf(const FitStore& fits, size_t t) {
+  if (fits.samples(t) == 0 && fits.donor(t) != FitStore::kClusterLobe) return TexelModel::kNoSamples;
+  if (fits.donor(t) == FitStore::kClusterLobe) return TexelModel::kClusterLobe;
+  if (fits.donor(t) >= 0) return TexelModel::kNeighbourLobe;
+  if (!fits.lambert_only(t)) return TexelModel::kOwnLobe;
+  return fits.status(t) == FitStatus::kConverged ? TexelModel::kLambertLobeAbsent
+                                                 : TexelModel::kLambertNoEvidence;
+}
+
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled,
                     const std::vector<int32_t>& cluster_of) {
@@ -95,12 +108,13 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits->size());
   REFLCAP_CHECK(cluster_of.empty() || cluster_of.size() == fits->size());
   {
-    constexpr int kStatusChannels = 6;
+    constexpr int kStatusChannels = 7;
     Image status(atlas.width, atlas.height, kStatusChannels, 0.0f);
     for (size_t p = 0; p < status.PixelCount(); ++p) {
       status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
       status.data[kStatusChannels * p + 3] = -1;
       status.data[kStatusChannels * p + 5] = -1;
+      status.data[kStatusChannels * p + 6] = -1;
     }
     for (size_t t = 0; t < fits->size(); ++t) {
       float* px = &status.data[kStatusChannels * size_t(atlas.pixel_of_texel[t])];
@@ -111,10 +125,11 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
       px[3] = float(fits->donor(t));
       px[4] = albedo_filled.empty() ? 0.0f : float(albedo_filled[t]);
       px[5] = cluster_of.empty() ? -1.0f : float(cluster_of[t]);
+      px[6] = float(int(TexelModelOf(*fits, t)));
     }
     REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "status.exr", status,
                                              {"status", "iterations", "cost", "lobe_donor",
-                                              "albedo_filled", "material_cluster"}));
+                                              "albedo_filled", "material_cluster", "model"}));
   }
   const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
   const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
@@ -389,8 +404,10 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   int max_iterations = 0;
   size_t lambert_only = 0;
   const int params_per_problem = NumParams(options.lobe_model, options.lobes);
+  std::array<size_t, kTexelModelCount> model_counts{};
   for (size_t t = 0; t < fits.size(); ++t) {
     ++summary.status_counts[int(fits.status(t))];
+    ++model_counts[size_t(TexelModelOf(fits, t))];
     if (fits.residuals(t) == 0) continue;
     ++summary.texels_with_samples;
     costs.push_back(fits.cost(t));
@@ -410,6 +427,12 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const double fits_count = double(info.texels) * ProblemsPerTexel(options.lobe_model);
   summary.fits_per_second = fit_seconds > 0 ? fits_count / fit_seconds : 0;
 
+  Json status_names = Json::array(), model_names = Json::array(), models = Json::object();
+  for (int s = 0; s < kFitStatusCount; ++s) status_names.push_back(FitStatusName(FitStatus(s)));
+  for (int m = 0; m < kTexelModelCount; ++m) {
+    model_names.push_back(kTexelModelNames[m]);
+    models[kTexelModelNames[m]] = model_counts[size_t(m)];
+  }
   Json counts = Json::object();
   for (int s = 0; s < kFitStatusCount; ++s) counts[FitStatusName(FitStatus(s))] = summary.status_counts[s];
   Json report = {
@@ -456,6 +479,9 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"texels_with_samples", summary.texels_with_samples},
       {"fits", size_t(fits_count)},
       {"status_counts", counts},
+      {"status_names", status_names},
+      {"model_counts", models},
+      {"model_names", model_names},
       {"lambert_only", lambert_only},
       {"lobe_transfer",
        {{"recipients", transfer.recipients},

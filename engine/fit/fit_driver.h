@@ -10,7 +10,8 @@
 //   FIT/status.exr       channels `status` (FitStatus code, -1 where the atlas has no texel),
 //                        `iterations`, `cost` (final 1/2 sum rho(r^2)) and `lobe_donor` (the
 //                        texel whose lobes it borrowed by lobe transfer or from its material
-//                        cluster, -1 for none), `albedo_filled` and `material_cluster`
+//                        cluster, -1 for none), `albedo_filled`, `material_cluster` and
+//                        `model` (TexelModel below)
 //   FIT/fit_report.json  backend, device, options, texels, counts per status, cost and reduced
 //                        chi^2 percentiles, iterations, fits_per_second, timings
 // The folder is staged and moved into place only when complete (StagingDir).
@@ -41,6 +42,22 @@ struct FitRunSummary {
   size_t cluster_lobes_replaced = 0;  // texels whose own or borrowed lobe gave way to it
 };
 
+// Which model a texel's final parameters are (status.exr `model`, fit_report.json
+// `model_counts`): Lambert because it saw its mirror configuration and showed no lobe; Lambert
+// for lack of evidence (no lobe was measured or lent); its own fitted lobe; a neighbour's (lobe
+// transfer); its material cluster's; no samples at all (an albedo from albedo fill or none).
+enum class TexelModel {
+  kLambertLobeAbsent = 0,
+  kLambertNoEvidence = 1,
+  kOwnLobe = 2,
+  kNeighbourLobe = 3,
+  kClusterLobe = 4,
+  kNoSamples = 5,
+};
+constexpr int kTexelModelCount = 6;
+extern const char* const kTexelModelNames[kTexelModelCount];
+TexelModel TexelModelOf(const FitStore& fits, size_t t);
+
 // Reads SAMPLES, fits with `backend`, writes FIT (refused when it exists non-empty, unless
 // overwrite). `vulkan` configures kVulkan: its device ("" = automatic, else an index or a name
 // substring), kernel and cluster size; `backend_choice`, when given, is written to fit_report.json as the reason for
@@ -61,7 +78,7 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
 // only its scalars remain. `albedo_filled` (one byte per texel, or empty for none) marks the
 // texels albedo_fill.h filled: status.exr's `albedo_filled` channel (1 = filled). `cluster_of`
 // (one per texel, or empty for none) is the `material_cluster` channel (material_clusters.h; -1 =
-// no cluster).
+// no cluster); the `model` channel is TexelModelOf (-1 = no texel).
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled = {},
                     const std::vector<int32_t>& cluster_of = {});

@@ -539,7 +539,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   if (!options.fit_dir.empty()) {
     const fs::path report = options.fit_dir / "fit_report.json";
     const fs::path status = options.fit_dir / "status.exr";
-    std::vector<std::string> status_names;
+    std::vector<std::string> status_names, model_names;
     auto text = ReadTextFile(report);
     if (text.ok()) {
       const Json j = Json::parse(*text, nullptr, false);
@@ -551,6 +551,9 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
           fit_html += "<tr><td>" + HtmlEscape(k) + "</td><td>" + HtmlEscape(v) + "</td></tr>\n";
         }
         fit_html += "</table>\n";
+        if (auto it = j.find("model_names"); it != j.end() && it->is_array()) {
+          for (const auto& n : *it) model_names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
+        }
         if (auto it = j.find("status_names"); it != j.end()) {
           if (it->is_array()) {
             for (const auto& n : *it) status_names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
@@ -573,22 +576,39 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     std::vector<std::string> channel_names;
     auto codes = ReadExrChannels(status, &channel_names);
     if (codes.ok()) {
-      int channel = 0;
-      for (size_t k = 0; k < channel_names.size(); ++k) {
-        if (channel_names[k] == "status" || channel_names[k] == "Y") channel = int(k);
+      // One categorical map per channel the fit wrote: its status, the model each texel ended
+      // with, and its material cluster (older FIT folders lack the last two: skipped).
+      struct Map {
+        std::string channel, png, title;
+        std::vector<std::string> names;
+      };
+      std::vector<std::string> cluster_names;
+      const std::vector<Map> maps = {
+          {"status", "status.png", "Fit status per texel", status_names},
+          {"model", "model.png", "Model per texel (what its parameters are)", model_names},
+          {"material_cluster", "clusters.png", "Material cluster per texel", cluster_names}};
+      for (const Map& map : maps) {
+        int channel = -1;
+        for (size_t k = 0; k < channel_names.size(); ++k) {
+          if (channel_names[k] == map.channel || (map.channel == "status" && channel_names[k] == "Y")) {
+            channel = int(k);
+          }
+        }
+        if (channel < 0) continue;
+        Image one(codes->width, codes->height, 1);
+        Image valid(codes->width, codes->height, 1);
+        for (size_t p = 0; p < one.PixelCount(); ++p) {
+          const float v = codes->data[p * codes->channels + size_t(channel)];
+          one.data[p] = v;
+          valid.data[p] = std::isfinite(v) && v >= 0 ? 1.0f : 0.0f;
+        }
+        REFLCAP_RETURN_IF_ERROR(
+            WritePng(out_dir / map.png, ComposeCategoricalMap(one, &valid, map.names)));
+        fit_html += "<h3>" + map.title + "</h3><p>" + HtmlEscape(status.string()) + " channel " +
+                    map.channel +
+                    " in atlas layout; black = no texel (negative or non-finite code).</p>"
+                    "<img src=\"" + map.png + "\" alt=\"" + map.title + "\">\n";
       }
-      Image one(codes->width, codes->height, 1);
-      Image valid(codes->width, codes->height, 1);
-      for (size_t p = 0; p < one.PixelCount(); ++p) {
-        const float v = codes->data[p * codes->channels + size_t(channel)];
-        one.data[p] = v;
-        valid.data[p] = std::isfinite(v) && v >= 0 ? 1.0f : 0.0f;
-      }
-      REFLCAP_RETURN_IF_ERROR(
-          WritePng(out_dir / "status.png", ComposeCategoricalMap(one, &valid, status_names)));
-      fit_html += "<h3>Fit status per texel</h3><p>" + HtmlEscape(status.string()) +
-                  " in atlas layout; black = no texel (negative or non-finite code).</p>"
-                  "<img src=\"status.png\" alt=\"fit status map\">\n";
     } else {
       fit_html += "<p class=note>No status map: " + HtmlEscape(codes.status().message()) + "</p>\n";
     }

@@ -101,8 +101,8 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   auto status = ReadExrChannels(out / "status.exr", &names);
   ASSERT_TRUE(status.ok()) << status.status().ToString();
   EXPECT_EQ(names, (std::vector<std::string>{"albedo_filled", "cost", "iterations", "lobe_donor",
-                                             "material_cluster", "status"}));
-  const int status_channel = 5;
+                                             "material_cluster", "model", "status"}));
+  const int status_channel = 6;
   EXPECT_EQ(status->at(1, 0, 0), 0.0f);  // albedo_filled: texel 1 has samples
   EXPECT_EQ(status->at(0, 0, status_channel), -1.0f);  // pixel 0 holds no texel
   EXPECT_EQ(status->at(1, 0, status_channel), float(int(FitStatus::kConverged)));

@@ -250,6 +250,38 @@ TEST(Validate, ReportGathersTheFitStatusMapAndTheCoverageMap) {
   EXPECT_NE(html.find("<img src=\"coverage.png\""), std::string::npos);
   EXPECT_NE(html.find("timings.total_s"), std::string::npos);
   EXPECT_NE(html.find("render (cpu, cpu): total_s"), std::string::npos);
+  // A single-channel map from an older fit: no model or cluster map to show.
+  EXPECT_FALSE(fs::exists(dir / "report/model.png"));
+  EXPECT_FALSE(fs::exists(dir / "report/clusters.png"));
+}
+
+TEST(Validate, ReportShowsTheModelAndClusterMapsTheFitWrote) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.01, 32, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  testing::WriteText(dir / "fit/fit_report.json",
+                     R"({"model_names": ["lambert_lobe_absent", "lambert_no_evidence", "own_lobe"]})");
+  // Channels as the fitter writes them (status.exr): status, model, material_cluster.
+  Image maps(20, 10, 3, -1.0f);
+  for (int x = 0; x < 10; ++x) {
+    maps.at(x, 5, 0) = 0;
+    maps.at(x, 5, 1) = float(x % 3);
+    maps.at(x, 5, 2) = float(x / 5);
+  }
+  ASSERT_TRUE(WriteExrChannels(dir / "fit/status.exr", maps, {"status", "model", "material_cluster"}).ok());
+  ValidateOptions options;
+  options.fit_dir = dir / "fit";
+  options.max_figures = 0;
+  auto summary = RunValidation(*capture, dir / "renders", dir / "report", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  for (const char* png : {"status.png", "model.png", "clusters.png"}) {
+    EXPECT_TRUE(fs::is_regular_file(dir / "report" / png)) << png;
+  }
+  const std::string html = ReadTextFile(dir / "report/report.html").value();
+  EXPECT_NE(html.find("<img src=\"model.png\""), std::string::npos);
+  EXPECT_NE(html.find("<img src=\"clusters.png\""), std::string::npos);
 }
 
 TEST(Validate, NumbersDoNotDependOnTheThreadCount) {
