@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
   int supersample = 1, writers = 0;
-  bool no_shadows = false, overwrite = false;
+  bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
       "Re-render the selected photographs of a capture from a fit: one float EXR per photograph\n"
@@ -44,7 +44,12 @@ int RunRender(int argc, char** argv) {
   args.AddString("shadow-map", &shadow_map, "KIND",
                  "Vulkan point-light shadow map: auto (default), cube or fitted");
   args.AddInt("supersample", &supersample, "N x N samples per pixel, 1..16 (default 1); mesh captures");
-  args.AddFlag("no-shadows", &no_shadows, "do not trace shadow rays (mesh captures)");
+  args.AddFlag("no-shadows", &no_shadows,
+               "no cast shadows: no shadow rays (mesh captures), no height-field shadows (normal "
+               "maps)");
+  args.AddFlag("no-height-shadows", &no_height_shadows,
+               "normal-map captures: no cast shadows from the height field integrated from the "
+               "normal map (mesh captures keep theirs)");
   args.AddInt("writers", &writers,
               "threads writing the output files while later images render (default 0: one per "
               "hardware thread)");
@@ -115,6 +120,7 @@ int RunRender(int argc, char** argv) {
   options.split = *selection;
   options.supersampling = supersample;
   options.cast_shadows = !no_shadows;
+  options.height_shadows = !no_height_shadows;
   options.writers = writers;
   std::string device_name = "the cpu";
   StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");

@@ -58,6 +58,10 @@ int RunResample(int argc, char** argv) {
                "weight the samples of a photograph that has images[].variance (e.g. from reflcap "
                "hdr) by that per-pixel variance, and take its dark/invalid tests from it (default: "
                "the noise model for every photograph)");
+  bool no_height_shadows = false;
+  args.AddFlag("no-height-shadows", &no_height_shadows,
+               "normal-map captures: do not reject samples in cast shadow on the height field "
+               "integrated from the normal map (default: rejected as shadowed)");
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite,
                "replace SAMPLES if it exists (only once the new one is complete)");
@@ -86,6 +90,7 @@ int RunResample(int argc, char** argv) {
   }
   options.split = *parsed_split;
   options.backend = *parsed_backend;
+  options.height_shadows = !no_height_shadows;
   if (Status s = options.Validate(); !s.ok()) {
     std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
     return kExitUsage;

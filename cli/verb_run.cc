@@ -98,6 +98,9 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   REFLCAP_LOG(kInfo) << "run 3/4: re-rendering the holdout split";
   render::CaptureRenderOptions render_options;
   render_options.split = render::SplitSelection::kHoldout;
+  // One switch for both stages: a normal-map capture's height-field shadows reject train samples
+  // and darken the holdout renders, or (--no-height-shadows) neither.
+  render_options.height_shadows = options.resample.height_shadows;
   bool rendered = false;
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER
   // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
@@ -160,6 +163,10 @@ int RunRun(int argc, char** argv) {
   args.AddFlag("variance-weights", &options.resample.use_variance,
                "resample: weight photographs that have images[].variance by it (default: the "
                "noise model)");
+  bool no_height_shadows = false;
+  args.AddFlag("no-height-shadows", &no_height_shadows,
+               "normal-map captures: no cast shadows from the height field integrated from the "
+               "normal map, neither rejecting train samples nor in the holdout renders");
   args.AddString("backend", &backend, "NAME",
                  "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
@@ -178,6 +185,7 @@ int RunRun(int argc, char** argv) {
     std::fprintf(stderr, "reflcap run: --out DIR is required\n");
     return kExitUsage;
   }
+  options.resample.height_shadows = !no_height_shadows;
   if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
     std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
     return kExitUsage;

@@ -141,6 +141,8 @@ struct ImageResampler::Frame {
   float exposure = 1;
   float saturation = 0;      // 0 = none
   double footprint_scale = 0;  // pinhole: metres per pixel per metre of depth; ortho: metres/pixel
+  // Normal-map captures with a height field: the march towards this photograph's light.
+  HeightFieldMarch march{};
   // The pixel map, filled lazily by the blocks that need a pixel: what the camera ray through
   // each pixel centre sees. Blocks may cast the same pixel concurrently; they compute identical
   // values, published with release/acquire so a reader sees depth whenever it sees kMapDone.
@@ -219,6 +221,25 @@ StatusOr<std::unique_ptr<ImageResampler>> ImageResampler::Create(const Capture& 
   return r;
 }
 
+Status ImageResampler::SetHeightField(const HeightField* field) {
+  if (field == nullptr) {
+    height_field_ = nullptr;
+    return OkStatus();
+  }
+  if (scene_ != nullptr) {
+    return FailedPreconditionError("SetHeightField: a mesh capture's cast shadows come from its "
+                                   "rays, not from a height field");
+  }
+  if (field->width != atlas_->width || field->height != atlas_->height ||
+      field->heights_px.size() != size_t(field->width) * size_t(field->height)) {
+    return InvalidArgumentError("SetHeightField: the height field is ", field->width, "x",
+                                field->height, " but the normal map is ", atlas_->width, "x",
+                                atlas_->height);
+  }
+  height_field_ = field;
+  return OkStatus();
+}
+
 Status CheckPhotograph(const Capture& capture, uint32_t image_index, const Image& pixels,
                        const Image* variance) {
   if (image_index >= capture.images.size()) {
@@ -267,6 +288,8 @@ Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageO
   f.saturation = float(image.saturation);
   f.footprint_scale = f.pinhole ? 1.0 / std::min(std::abs(camera.K(0, 0)), std::abs(camera.K(1, 1)))
                                 : camera.pixel_size_m;
+  // A normal-map capture has no turntable (Create checked), so the object frame is the world's.
+  if (height_field_ != nullptr) f.march = MakeHeightFieldMarch(*height_field_, light.direction);
 
   const size_t texels = atlas.TexelCount();
   out->outcome.assign(texels, uint8_t(Outcome::kKept));
@@ -650,6 +673,11 @@ void ImageResampler::ProcessNormalMapBlock(const Frame& f, const Image& pixels,
     const float cos_i = n.dot(wi);
     if (!(cos_i > min_cos_)) {
       out->outcome[t] = uint8_t(Outcome::kGrazingLight);
+      continue;
+    }
+    if (height_field_ != nullptr &&
+        HeightFieldShadowed(height_field_->heights_px.data(), f.march, x, y)) {
+      out->outcome[t] = uint8_t(Outcome::kShadowed);
       continue;
     }
     Vec3f wi_local, wo_local;

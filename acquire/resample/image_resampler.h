@@ -33,8 +33,12 @@
 // share taps, so this costs far fewer rays than four per candidate when texels are smaller than
 // pixels, and never more. Visibility and shadow rays of a block go out in 16-wide packets.
 //
-// Normal-map captures (no mesh) take the texel's own pixel as its projection, and every texel is
-// visible and unshadowed by construction (no occlusion, shadow or tap rays are cast).
+// Normal-map captures (no mesh) take the texel's own pixel as its projection and every texel is
+// visible (an orthographic view sees every pixel of its normal map); no occlusion, shadow or tap
+// ray is cast. With a height field (SetHeightField: the normal map integrated into a surface,
+// engine/mesh/height_field.h) a texel whose march towards the photograph's light passes below
+// that surface is kShadowed, tested where the mesh path casts its shadow ray (after the light's
+// grazing test); without one, every texel counts as unshadowed.
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -47,6 +51,7 @@
 #include "engine/core/status.h"
 #include "engine/image/image.h"
 #include "engine/math/types.h"
+#include "engine/mesh/height_field.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
 
@@ -203,6 +208,13 @@ class ImageResampler {
   // True when a normal-map capture: no ray is cast.
   bool normal_map() const { return scene_ == nullptr; }
 
+  // Normal-map captures: reject texels in cast shadow on `field` (IntegrateNormalMap of the
+  // capture's normal map; it must outlive the resampler and have the atlas's size, else
+  // InvalidArgument). nullptr (the default) = no shadow test. FailedPrecondition for a mesh
+  // capture, whose shadows come from its rays.
+  Status SetHeightField(const HeightField* field);
+  const HeightField* height_field() const { return height_field_; }
+
  private:
   ImageResampler() = default;
   struct Frame;
@@ -219,6 +231,7 @@ class ImageResampler {
   const Capture* capture_ = nullptr;
   const TexelAtlas* atlas_ = nullptr;
   const RayScene* scene_ = nullptr;
+  const HeightField* height_field_ = nullptr;  // normal-map captures: cast shadows (or none)
   NoiseModel noise_;
   float min_cos_ = 0;
   int threads_ = 0;

@@ -22,6 +22,7 @@
 #include "engine/image/exr_io.h"
 #include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
+#include "engine/mesh/height_field.h"
 #include "engine/mesh/mesh_io.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
@@ -242,6 +243,8 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   std::unique_ptr<RayScene> scene;
   std::string atlas_source;
   const bool normal_map = capture.normal_map.has_value();
+  std::unique_ptr<HeightField> height_field;  // normal-map captures with height_shadows
+  std::string height_field_note;
   if (!normal_map) {
     auto mesh = LoadMesh(capture.Resolve(capture.mesh));
     if (!mesh.ok()) return Status(mesh.status().code(), StrCat(file, ": mesh: ", mesh.status().message()));
@@ -270,6 +273,29 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     }
     atlas = std::move(*built);
     atlas_source = "normal map (the camera's masked pixels)";
+    const Camera& camera = capture.cameras[g.camera];
+    if (!options.height_shadows) {
+      height_field_note = "off (--no-height-shadows)";
+    } else if (camera.model != CameraModel::kOrthographic) {
+      height_field_note = StrCat("off: camera \"", camera.id, "\" is not orthographic");
+      REFLCAP_LOG(kWarning) << file << ": normal_map: " << height_field_note
+                            << "; no cast-shadow test";
+    } else {
+      auto integrated = IntegrateNormalMap(atlas, camera);
+      if (!integrated.ok()) {
+        return Status(integrated.status().code(),
+                      StrCat(file, ": normal_map: ", integrated.status().message()));
+      }
+      height_field = std::make_unique<HeightField>(std::move(*integrated));
+      height_field_note = "on";
+      REFLCAP_LOG(kInfo) << "height field: " << height_field->stats.ToString();
+      if (height_field->stats.backfacing > 0) {
+        REFLCAP_LOG(kWarning) << file << ": normal_map.normals: "
+                              << height_field->stats.backfacing
+                              << " normals face away from the camera; integrated as the steepest "
+                                 "slope along their image-plane direction";
+      }
+    }
   }
   const size_t texels = atlas.TexelCount();
   if (texels == 0) return FailedPreconditionError(file, ": the atlas has no texels");
@@ -279,6 +305,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<ImageResampler> resampler,
                            ImageResampler::Create(capture, atlas, scene.get(), noise.model,
                                                   options.min_cos, options.threads));
+  REFLCAP_RETURN_IF_ERROR(resampler->SetHeightField(height_field.get()));
   // The Vulkan masks replace the Embree path for mesh captures (a normal-map capture casts no
   // ray: it runs the CPU path under either backend).
   std::unique_ptr<VulkanMasks> masks;
@@ -291,8 +318,9 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                                         options.min_cos, mo));
     device = masks->device_name();
   } else if (options.backend == Backend::kVulkan) {
-    REFLCAP_LOG(kWarning) << "--backend vulkan: a normal-map capture casts no ray (every texel is "
-                             "visible and unshadowed); resampling it on the CPU";
+    REFLCAP_LOG(kWarning) << "--backend vulkan: a normal-map capture casts no ray (visibility is "
+                             "given; cast shadows come from its height field); resampling it on "
+                             "the CPU";
   }
   const bool cross_check = options.cross_check && masks != nullptr;
   MaskAgreement agreement;
@@ -548,9 +576,16 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
       {"device", device},
       {"split", info.split},
       {"geometry", info.geometry},
-      {"visibility", normal_map
+      {"visibility", normal_map && height_field != nullptr
+                         ? "normal map: every texel is visible (an orthographic view sees each of "
+                           "its pixels; no occlusion or footprint test); cast shadow from the "
+                           "height field integrated from the normals: a march from the texel "
+                           "towards the light that passes more than the bias below the field "
+                           "rejects it as shadowed (see height_field)"
+                     : normal_map
                          ? "not tested: a normal-map capture has no mesh, so every texel counts as "
-                           "visible and unshadowed (no occlusion, shadow or footprint rays)"
+                           "visible and unshadowed (no occlusion, shadow or footprint rays; height "
+                           "field " + height_field_note + ")"
                      : masks != nullptr
                          ? "Vulkan depth maps: camera map (the mesh rasterised from the camera: "
                            "distance, hit, lit per pixel ray) and light map (cube, fitted frustum "
@@ -643,6 +678,36 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                 "min_half_angle_deg (90 without samples), observations (images "
                                 "showing it lit), samples, seen (0/1), views (distinct camera x "
                                 "turntable poses with a sample)"}}}};
+  if (normal_map) {
+    Json hf = {{"cast_shadows", height_field_note}};
+    if (height_field != nullptr) {
+      const HeightFieldStats& st = height_field->stats;
+      hf["method"] =
+          "least-squares integration of the gradients (-n_x/n_z, -n_y/n_z) over 4-neighbour texel "
+          "pairs (sparse Cholesky), gradients clamped to max_slope; shadow: march along the "
+          "light's image-plane direction, blocked where the bilinear field exceeds the ray by "
+          "more than bias_px";
+      hf["units"] = height_field->pixel_size_m > 0
+                        ? StrCat("pixels (", height_field->pixel_size_m, " m each)")
+                        : std::string("pixels");
+      hf["texels"] = st.texels;
+      hf["components"] = st.components;
+      hf["equations"] = st.equations;
+      hf["clamped_gradients"] = st.clamped;
+      hf["backfacing_normals"] = st.backfacing;
+      hf["max_slope"] = kMaxHeightFieldSlope;
+      hf["residual_rms_px"] = st.rms_residual_px;
+      hf["residual_max_px"] = st.max_residual_px;
+      hf["height_range_px"] = {st.min_height_px, st.max_height_px};
+      hf["bias_px"] = kHeightFieldShadowBiasPx;
+      hf["max_march_steps"] = kMaxHeightFieldMarchSteps;
+      hf["integrate_s"] = st.seconds;
+      hf["limits"] =
+          "least squares smooths across depth discontinuities (a step's shadow starts too close "
+          "and is too short there); residual_* measure how far the normals are from integrable";
+    }
+    report["height_field"] = hf;
+  }
   if (masks != nullptr) {
     report["vulkan"] = {{"light_map", mask_stats.light_map},
                         {"light_map_resolution", mask_stats.light_resolution},
@@ -732,6 +797,17 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                       ? " (the capture has variance images; --variance-weights uses them)"
                       : "");
     text << line;
+  }
+  if (height_field != nullptr) {
+    std::snprintf(line, sizeof line,
+                  "  cast shadows from the normal map's height field: %llu samples shadowed "
+                  "(integration residual rms %.2f px, heights %.0f..%.0f px)\n",
+                  (unsigned long long)reasons[int(Reason::kShadowed)],
+                  height_field->stats.rms_residual_px, height_field->stats.min_height_px,
+                  height_field->stats.max_height_px);
+    text << line;
+  } else if (normal_map) {
+    text << "  cast shadows: not tested (height field " << height_field_note << ")\n";
   }
   if (masks != nullptr) {
     std::snprintf(line, sizeof line, "  backend vulkan on %s (light map: %s, %d px)\n",

@@ -97,6 +97,12 @@ struct ResampleOptions {
   // noise, and the measured variance (which down-weights the highlights) lost up to 0.5 dB of
   // holdout PSNR against the noise model (README, "Per-pixel variance").
   bool use_variance = false;
+  // Normal-map captures: integrate the normal map into a height field (engine/mesh/height_field.h)
+  // and reject, as `shadowed`, the samples whose texel lies in its cast shadow under the
+  // photograph's light. false (--no-height-shadows): no shadow test, as before the height field
+  // (every texel counts as unshadowed). Needs an orthographic camera; with a pinhole one the test
+  // is skipped with a warning and the report says why. Mesh captures ignore it.
+  bool height_shadows = true;
   uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
   size_t spill_buffer_bytes = kDefaultSpillBufferBytes;
   int threads = 0;  // 0 = all cores

@@ -271,7 +271,8 @@ std::vector<float> NormalMapCurvature(const TexelAtlas& atlas, const Camera& cam
 
 StatusOr<RenderResult> RenderNormalMapImage(const TexelAtlas& atlas, const BrdfMaps& maps,
                                             const Camera& camera, const Light& light,
-                                            double exposure_s, const RenderOptions& options) {
+                                            double exposure_s, const RenderOptions& options,
+                                            const HeightField* heights) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   REFLCAP_CHECK(maps.texels.size() == atlas.TexelCount());
   if (atlas.width != camera.width || atlas.height != camera.height) {
@@ -283,6 +284,13 @@ StatusOr<RenderResult> RenderNormalMapImage(const TexelAtlas& atlas, const BrdfM
                                 "\": normal-map captures are rendered with directional lights "
                                 "only (the surface positions are unknown)");
   }
+  if (heights != nullptr && (heights->width != atlas.width || heights->height != atlas.height)) {
+    return InvalidArgumentError("the height field is ", heights->width, "x", heights->height,
+                                " but the normal map is ", atlas.width, "x", atlas.height);
+  }
+  const bool shadows = options.cast_shadows && heights != nullptr;
+  const HeightFieldMarch march =
+      shadows ? MakeHeightFieldMarch(*heights, light.direction) : HeightFieldMarch{};
   const Rigid3 world_from_cam = camera.cam_from_world.Inverse();
   const Vec3f wi = light.direction.normalized().cast<float>();
   const Vec3f intensity = light.intensity.cast<float>();
@@ -314,7 +322,12 @@ StatusOr<RenderResult> RenderNormalMapImage(const TexelAtlas& atlas, const BrdfM
         aux[kAuxCosThetaO] = cos_o;
         aux[kAuxCurvature] = curvature[size_t(t)];
       }
-      if (cos_i <= 0 || cos_o <= 0) continue;
+      if (cos_i <= 0) continue;
+      if (shadows && HeightFieldShadowed(heights->heights_px.data(), march, x, y)) {
+        if (options.aux_buffers) result.aux.pixel(x, y)[kAuxCastShadow] = 1;
+        continue;
+      }
+      if (cos_o <= 0) continue;
       const Vec3f wi_local(tangent.dot(wi), bitangent.dot(wi), cos_i);
       const Vec3f wo_local(tangent.dot(wo), bitangent.dot(wo), cos_o);
       const Vec3f f = brdf::EvalRgb(maps.texels[size_t(t)], wi_local, wo_local);

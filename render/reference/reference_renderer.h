@@ -18,8 +18,10 @@
 // curvature (see AuxChannel and SurfaceCurvature below).
 //
 // Normal-map captures (RenderNormalMapImage): one texel per masked pixel, shaded from its own
-// normal with directional lights; no rays are cast, so there are no cast shadows and no
-// supersampling (the texel is the pixel).
+// normal with directional lights; no rays are cast and there is no supersampling (the texel is
+// the pixel). Cast shadows come from the height field integrated from the normal map
+// (engine/mesh/height_field.h) when one is given: a pixel whose march towards the light passes
+// below it gets no direct light.
 #include <string>
 #include <vector>
 
@@ -28,6 +30,7 @@
 #include "engine/core/status.h"
 #include "engine/geometry/rigid3.h"
 #include "engine/image/image.h"
+#include "engine/mesh/height_field.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
 #include "engine/texel/brdf_maps.h"
@@ -106,12 +109,15 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& scene, const Camera& camer
 // Renders one photograph of a normal-map capture: atlas from BuildNormalMapAtlas (texel = pixel of
 // `camera`, normals in the world frame), maps one entry per texel. pixel = exposure_s * f(wi, wo) *
 // I * max(0, cos θi) with wi = light.direction (InvalidArgument for a point light: the surface
-// positions are unknown) and wo = -camera axis (orthographic) or -pixel ray (pinhole). No cast
-// shadows and no supersampling (options.supersampling and cast_shadows are ignored); mask = 1 on
-// texels. The atlas must have the camera's size (InvalidArgument otherwise).
+// positions are unknown) and wo = -camera axis (orthographic) or -pixel ray (pinhole). Cast
+// shadows when options.cast_shadows and `heights` (IntegrateNormalMap of this normal map) is
+// given: a pixel facing the light (cos θi > 0) for which HeightFieldShadowed holds is black and
+// has aux cast_shadow = 1. No supersampling (options.supersampling is ignored); mask = 1 on
+// texels. The atlas (and `heights`) must have the camera's size (InvalidArgument otherwise).
 StatusOr<RenderResult> RenderNormalMapImage(const TexelAtlas& atlas, const BrdfMaps& maps,
                                             const Camera& camera, const Light& light,
-                                            double exposure_s, const RenderOptions& options);
+                                            double exposure_s, const RenderOptions& options,
+                                            const HeightField* heights = nullptr);
 
 // The object mask alone (1 ray per pixel centre), as RenderResult::mask.
 StatusOr<Image> RenderMask(const RayScene& scene, const Camera& camera,

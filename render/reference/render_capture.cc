@@ -83,7 +83,8 @@ std::string MaskPathFor(const std::string& file) { return "masks/" + ImageKey(fi
 std::string AuxPathFor(const std::string& file) { return "aux/" + ImageKey(file) + ".exr"; }
 
 StatusOr<std::unique_ptr<FittedCapture>> LoadFittedCapture(const Capture& capture,
-                                                           const fs::path& params_exr) {
+                                                           const fs::path& params_exr,
+                                                           bool height_field) {
   auto fitted = std::make_unique<FittedCapture>();
   fitted->capture = &capture;
   REFLCAP_ASSIGN_OR_RETURN(ImageInfo params_info, ReadExrInfo(params_exr));
@@ -101,6 +102,17 @@ StatusOr<std::unique_ptr<FittedCapture>> LoadFittedCapture(const Capture& captur
     auto atlas = BuildNormalMapAtlas(normals, mask);
     if (!atlas.ok()) return atlas.status().WithContext(capture.json_path.string());
     fitted->atlas = std::move(atlas).value();
+    if (height_field && cam.model != CameraModel::kOrthographic) {
+      REFLCAP_LOG(kWarning) << capture.json_path.string() << ": normal_map: camera \"" << cam.id
+                            << "\" is not orthographic: no height field, no cast shadows";
+    } else if (height_field) {
+      auto field = IntegrateNormalMap(fitted->atlas, cam);
+      if (!field.ok()) {
+        return field.status().WithContext(StrCat(capture.json_path.string(), ": normal_map"));
+      }
+      fitted->height_field = std::make_unique<HeightField>(std::move(field).value());
+      REFLCAP_LOG(kInfo) << "height field: " << fitted->height_field->stats.ToString();
+    }
   } else {
     REFLCAP_ASSIGN_OR_RETURN(fitted->mesh, LoadMesh(capture.Resolve(capture.mesh)));
     REFLCAP_ASSIGN_OR_RETURN(fitted->scene, RayScene::Create(fitted->mesh));
@@ -131,7 +143,8 @@ StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t in
   const Light& light = capture.lights[image.light];
   StatusOr<RenderResult> result =
       fitted.normal_map
-          ? RenderNormalMapImage(fitted.atlas, fitted.maps, camera, light, image.exposure_s, options)
+          ? RenderNormalMapImage(fitted.atlas, fitted.maps, camera, light, image.exposure_s, options,
+                                 fitted.height_field.get())
           : RenderImage({fitted.scene.get(), &fitted.atlas, &fitted.maps}, camera, light,
                         capture.WorldFromObject(image), image.exposure_s, options);
   if (!result.ok()) {
@@ -198,7 +211,8 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
 
   CaptureRenderSummary summary;
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<FittedCapture> fitted,
-                           LoadFittedCapture(capture, params_exr));
+                           LoadFittedCapture(capture, params_exr,
+                                             options.cast_shadows && options.height_shadows));
   summary.texels = fitted->atlas.TexelCount();
   summary.num_lobes = fitted->maps.num_lobes;
   if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
@@ -313,7 +327,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
       {"split", SplitSelectionName(options.split)},
       {"geometry", fitted->normal_map ? "normal_map" : "mesh"},
       {"supersampling", fitted->normal_map ? 1 : options.supersampling},
-      {"cast_shadows", fitted->normal_map ? false : options.cast_shadows},
+      {"cast_shadows", fitted->normal_map ? fitted->height_field != nullptr : options.cast_shadows},
       {"atlas", {{"width", fitted->atlas.width}, {"height", fitted->atlas.height},
                  {"texels", fitted->atlas.TexelCount()}}},
       {"num_lobes", fitted->maps.num_lobes},
@@ -336,6 +350,27 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         {"write_tail_s", "from the last image rendered until every file was written"},
         {"images[].render_s", "time since the previous image was rendered (a batch's images "
                               "arrive together)"}}}};
+  if (fitted->height_field != nullptr) {
+    const HeightFieldStats& st = fitted->height_field->stats;
+    report["height_field"] = {
+        {"cast_shadows", "a pixel facing the light is black (aux cast_shadow 1) when its march "
+                         "towards the light passes more than bias_px below the height field "
+                         "integrated from the normal map"},
+        {"texels", st.texels},
+        {"components", st.components},
+        {"clamped_gradients", st.clamped},
+        {"backfacing_normals", st.backfacing},
+        {"residual_rms_px", st.rms_residual_px},
+        {"residual_max_px", st.max_residual_px},
+        {"height_range_px", {st.min_height_px, st.max_height_px}},
+        {"bias_px", kHeightFieldShadowBiasPx},
+        {"integrate_s", st.seconds}};
+  } else if (fitted->normal_map) {
+    report["height_field"] = {
+        {"cast_shadows", options.cast_shadows && options.height_shadows
+                             ? "none: the camera is not orthographic"
+                             : "none: off (--no-shadows or --no-height-shadows)"}};
+  }
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "render_report.json", report.dump(2) + "\n"));
   return summary;
 }

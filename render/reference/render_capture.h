@@ -56,13 +56,19 @@ struct FittedCapture {
   std::unique_ptr<RayScene> scene;    // mesh captures
   TexelAtlas atlas;
   BrdfMaps maps;
+  // Normal-map captures: the height field integrated from the normal map (cast shadows), when
+  // LoadFittedCapture was asked for it and the camera is orthographic; else null.
+  std::unique_ptr<HeightField> height_field;
 };
 
-// Loads the geometry of `capture` and the parameter map `params_exr` in its atlas layout.
-// Errors name the file: NotFound (missing), InvalidArgument (a missing channel, a size that does
-// not match a normal-map capture's camera), DataLoss (corrupt).
+// Loads the geometry of `capture` and the parameter map `params_exr` in its atlas layout; for a
+// normal-map capture with `height_field` also integrates its height field (IntegrateNormalMap;
+// skipped with a warning for a pinhole camera). Errors name the file: NotFound (missing),
+// InvalidArgument (a missing channel, a size that does not match a normal-map capture's camera),
+// DataLoss (corrupt).
 StatusOr<std::unique_ptr<FittedCapture>> LoadFittedCapture(const Capture& capture,
-                                                           const std::filesystem::path& params_exr);
+                                                           const std::filesystem::path& params_exr,
+                                                           bool height_field = true);
 
 // Renders capture image `index` (mesh or normal map).
 StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t index,
@@ -71,7 +77,10 @@ StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t in
 struct CaptureRenderOptions {
   SplitSelection split = SplitSelection::kHoldout;
   int supersampling = 1;     // N x N samples per pixel, [1, kMaxSupersampling]; mesh captures
-  bool cast_shadows = true;  // mesh captures
+  bool cast_shadows = true;  // mesh captures: shadow rays; normal maps: see height_shadows
+  // Normal-map captures: cast shadows from the height field integrated from the normal map (with
+  // cast_shadows; false = none, as before the height field). Mesh captures ignore it.
+  bool height_shadows = true;
   // Threads writing the output files while later images render (EXR compression is most of a
   // GPU render's time); 0 = one per hardware thread. [0, 256].
   int writers = 0;

@@ -10,7 +10,8 @@ Status SetFittedScene(VulkanRenderer& renderer, const FittedCapture& fitted) {
   if (fitted.normal_map) {
     const Capture& capture = *fitted.capture;
     return renderer.SetNormalMapScene(fitted.atlas, fitted.maps,
-                                      capture.cameras[capture.normal_map->camera]);
+                                      capture.cameras[capture.normal_map->camera],
+                                      fitted.height_field.get());
   }
   return renderer.SetScene({fitted.scene.get(), &fitted.atlas, &fitted.maps});
 }

@@ -47,7 +47,7 @@ using gpu::RenderTarget;
 // Descriptor bindings (shaders/render/render_inputs.glsl and the passes).
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindMaterial = 3,
                    kBindFrame = 4, kBindShadowMap = 5, kBindSource = 6, kBindOutRadiance = 7,
-                   kBindOutAux = 8, kBindNormalMapTexels = 9;
+                   kBindOutAux = 8, kBindNormalMapTexels = 9, kBindHeightField = 10;
 // Workgroup sizes of the compute passes (the shaders' local_size).
 constexpr uint32_t kTile = 8;         // distort_resolve.comp, downsample.comp: 8 x 8
 constexpr uint32_t kTexelGroup = 64;  // normal_map_shade.comp
@@ -219,6 +219,7 @@ struct ImagePlan {
   int rect_x0 = 0, rect_y0 = 0, rect_w = 0, rect_h = 0;
   sh::RenderParams params{};        // shadow, 1x camera (or visibility + resolve), normal map
   sh::RenderParams hires_params{};  // the supersampled camera pass (Supersampled())
+  sh::HeightFieldMarch march{};     // normal maps: the height-field shadow march (steps 0: none)
   VulkanRenderStats stats;          // shadow map and visibility of this image
 
   bool Supersampled() const { return !normal_map && !distorted && supersampling > 1; }
@@ -319,6 +320,10 @@ struct VulkanRenderer::Impl {
   // Scene.
   enum class SceneKind { kNone, kMesh, kNormalMap } scene_kind = SceneKind::kNone;
   std::unique_ptr<Buffer> corners, triangles, normal_map_texels;
+  // Normal-map scenes: the height field (heights_px uploaded; one float when there is none), and
+  // the host copy its marches are planned from.
+  std::unique_ptr<Buffer> height_field_buffer;
+  std::unique_ptr<HeightField> height_field;
   std::unique_ptr<DeviceImage> material, frame, dummy_shadow;
   uint32_t triangle_count = 0;
   uint32_t texel_count = 0;
@@ -416,7 +421,8 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
                                                            {kBindMaterial, kTex, kComp},
                                                            {kBindOutRadiance, kSsbo, kComp},
                                                            {kBindOutAux, kSsbo, kComp},
-                                                           {kBindNormalMapTexels, kSsbo, kComp}}));
+                                                           {kBindNormalMapTexels, kSsbo, kComp},
+                                                           {kBindHeightField, kSsbo, kComp}}));
 
   REFLCAP_ASSIGN_OR_RETURN(
       resolve_pipeline,
@@ -800,6 +806,9 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanNormalMapImage(const Camera& camer
   p.width = uint32_t(w);
   p.height = uint32_t(h);
   p.supersampling = 1;
+  if (options.cast_shadows && height_field != nullptr) {
+    plan.march = MakeHeightFieldMarch(*height_field, light.direction);
+  }
   return plan;
 }
 
@@ -1022,12 +1031,15 @@ Status VulkanRenderer::Impl::RecordNormalMapImage(Flight& flight, size_t k,
   set.WriteBuffer(kBindOutRadiance, *slot.out_radiance, 0, out_bytes);
   set.WriteBuffer(kBindOutAux, *slot.out_aux, 0, out_bytes);
   set.WriteBuffer(kBindNormalMapTexels, *normal_map_texels);
+  set.WriteBuffer(kBindHeightField, *height_field_buffer);
   const VkCommandBuffer cb = flight.cmd.handle();
   // Pixels without a texel stay 0 (background).
   vkCmdFillBuffer(cb, slot.out_radiance->handle(), 0, out_bytes, 0);
   vkCmdFillBuffer(cb, slot.out_aux->handle(), 0, out_bytes, 0);
   RecordTransferToCompute(cb);
-  const sh::NormalMapPush push{texel_count};
+  sh::NormalMapPush push{};
+  push.texels = texel_count;
+  push.march = plan.march;
   normal_map_pipeline.Bind(cb, set.handle());
   normal_map_pipeline.Push(cb, &push, sizeof(push));
   vkCmdDispatch(cb, (texel_count + kTexelGroup - 1) / kTexelGroup, 1, 1);
@@ -1319,9 +1331,16 @@ Status VulkanRenderer::SetScene(const ShadedScene& scene) {
 }
 
 Status VulkanRenderer::SetNormalMapScene(const TexelAtlas& atlas, const BrdfMaps& maps,
-                                         const Camera& camera) {
+                                         const Camera& camera, const HeightField* heights) {
   Impl& m = *impl_;
   if (atlas.TexelCount() == 0) return InvalidArgumentError("SetNormalMapScene: no texels");
+  if (heights != nullptr &&
+      (heights->width != atlas.width || heights->height != atlas.height ||
+       heights->heights_px.size() != size_t(atlas.width) * size_t(atlas.height))) {
+    return InvalidArgumentError("SetNormalMapScene: the height field is ", heights->width, "x",
+                                heights->height, " but the normal map is ", atlas.width, "x",
+                                atlas.height);
+  }
   m.scene_kind = Impl::SceneKind::kNone;
   const std::vector<float> curvature = NormalMapCurvature(atlas, camera);
   std::vector<sh::NormalMapTexel> texels(atlas.TexelCount());
@@ -1345,6 +1364,17 @@ Status VulkanRenderer::SetNormalMapScene(const TexelAtlas& atlas, const BrdfMaps
   REFLCAP_ASSIGN_OR_RETURN(Buffer tb, gpu::CreateBufferFrom(*m.ctx, texels));
   m.normal_map_texels = std::make_unique<Buffer>(std::move(tb));
   m.texel_count = uint32_t(texels.size());
+  const std::vector<float> none(1, kHeightFieldOutside);
+  const std::vector<float>& field = heights != nullptr ? heights->heights_px : none;
+  if (field.size() * sizeof(float) > m.ctx->info().max_storage_buffer_range) {
+    return UnavailableError("a height field of ", field.size(),
+                            " pixels exceeds one storage buffer on ", m.ctx->info().name);
+  }
+  m.height_field_buffer.reset();
+  m.height_field.reset();
+  REFLCAP_ASSIGN_OR_RETURN(Buffer hb, gpu::CreateBufferFrom(*m.ctx, field));
+  m.height_field_buffer = std::make_unique<Buffer>(std::move(hb));
+  if (heights != nullptr) m.height_field = std::make_unique<HeightField>(*heights);
   REFLCAP_RETURN_IF_ERROR(m.UploadMaterial(atlas, maps));
   m.scene_kind = Impl::SceneKind::kNormalMap;
   return OkStatus();

@@ -196,8 +196,11 @@ class VulkanRenderer {
   // maps must have one entry per atlas texel (checked). Unavailable when the mesh or the atlas
   // exceeds a device limit.
   Status SetScene(const ShadedScene& scene);
-  // Uploads a normal-map scene: atlas from BuildNormalMapAtlas, maps one entry per texel.
-  Status SetNormalMapScene(const TexelAtlas& atlas, const BrdfMaps& maps, const Camera& camera);
+  // Uploads a normal-map scene: atlas from BuildNormalMapAtlas, maps one entry per texel, and
+  // optionally its height field (IntegrateNormalMap, the atlas's size; else InvalidArgument),
+  // which casts shadows as in RenderNormalMapImage (options.cast_shadows); nullptr = none.
+  Status SetNormalMapScene(const TexelAtlas& atlas, const BrdfMaps& maps, const Camera& camera,
+                           const HeightField* heights = nullptr);
 
   // RenderImage of reference_renderer.h on the GPU, for the scene of SetScene.
   StatusOr<RenderResult> RenderImage(const Camera& camera, const Light& light,

@@ -5,6 +5,7 @@
 #ifndef REFLCAP_SHADERS_SHARED_RENDER_PARAMS_H_
 #define REFLCAP_SHADERS_SHARED_RENDER_PARAMS_H_
 
+#include "height_field.h"
 #include "interop.h"
 #include "light_map_view.h"
 
@@ -103,11 +104,17 @@ struct NormalMapTexel {
 };
 REFLCAP_STD430_SIZE(NormalMapTexel, 64);
 
-// Push constants of normal_map_shade.comp.
+// Push constants of normal_map_shade.comp: the texel count and this image's height-field march
+// (march.steps = 0: no cast shadows).
 struct NormalMapPush {
   uint texels;
+  uint pad0;
+  uint pad1;
+  uint pad2;
+  HeightFieldMarch march;
 };
-REFLCAP_STD430_SIZE(NormalMapPush, 4);
+REFLCAP_STD430_OFFSET(NormalMapPush, march, 16);
+REFLCAP_STD430_SIZE(NormalMapPush, 48);
 
 REFLCAP_SHARED_END
 

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "engine/brdf/lafortune.h"
+#include "tests/support/height_scenes.h"
 #include "tests/support/shapes.h"
 
 namespace reflcap::render {
@@ -414,6 +415,59 @@ TEST(NormalMapRenderer, LambertianSphereMatchesClosedFormWithItsAuxBuffers) {
   EXPECT_GT(r->pixels.at(32, 10, 0), r->pixels.at(32, 54, 0));
   std::sort(curvature.begin(), curvature.end());
   EXPECT_NEAR(curvature[curvature.size() / 2], 1.0, 0.1) << "sphere: curvature x size ~ 1";
+}
+
+TEST(NormalMapRenderer, HeightFieldShadowsBlackenWhatTheMarchShadows) {
+  // A Lambertian plate with a spherical pit under a low light: with the height field, exactly the
+  // pixels facing the light whose march is blocked are black with aux cast_shadow = 1; every
+  // other pixel equals the render without shadows, which --no-shadows (cast_shadows = false) and
+  // a missing height field both give.
+  const int w = 80, h = 76;
+  Image normals, mask;
+  reflcap::testing::NormalMapOf(reflcap::testing::PittedPlate(40, 37, 36, 30), w, h, &normals,
+                                &mask);
+  auto atlas = BuildNormalMapAtlas(normals, mask);
+  ASSERT_TRUE(atlas.ok());
+  const Camera cam = reflcap::testing::DiligentCamera(w, h);
+  auto field = IntegrateNormalMap(*atlas, cam);
+  ASSERT_TRUE(field.ok()) << field.status().ToString();
+  BrdfMaps maps;
+  brdf::BrdfParams p;
+  p.rho_d = {0.8f, 0.5f, 0.3f};
+  maps.texels.assign(atlas->TexelCount(), p);
+  Light light;
+  light.type = LightType::kDirectional;
+  light.direction = Vec3d(-0.85, 0.3, 0.35).normalized();  // 21 deg above the plate
+  RenderOptions options;
+  options.aux_buffers = true;
+  auto plain = RenderNormalMapImage(*atlas, maps, cam, light, 1, options);
+  auto shadowed = RenderNormalMapImage(*atlas, maps, cam, light, 1, options, &*field);
+  RenderOptions off = options;
+  off.cast_shadows = false;
+  auto switched_off = RenderNormalMapImage(*atlas, maps, cam, light, 1, off, &*field);
+  ASSERT_TRUE(plain.ok() && shadowed.ok() && switched_off.ok());
+  EXPECT_EQ(switched_off->pixels.data, plain->pixels.data);
+  EXPECT_EQ(switched_off->aux.data, plain->aux.data);
+  const HeightFieldMarch march = MakeHeightFieldMarch(*field, light.direction);
+  size_t dark = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const bool facing = plain->aux.at(x, y, kAuxCosThetaI) > 0;
+      const bool blocked =
+          facing && HeightFieldShadowed(field->heights_px.data(), march, x, y);
+      ASSERT_EQ(shadowed->aux.at(x, y, kAuxCastShadow), blocked ? 1.0f : 0.0f) << x << "," << y;
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_EQ(shadowed->pixels.at(x, y, c), blocked ? 0.0f : plain->pixels.at(x, y, c));
+      }
+      dark += blocked;
+    }
+  }
+  EXPECT_GT(dark, 200u) << "the pit must shadow itself";
+  // A height field of another size is refused.
+  HeightField wrong = *field;
+  wrong.width = w - 1;
+  EXPECT_EQ(RenderNormalMapImage(*atlas, maps, cam, light, 1, options, &wrong).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST(NormalMapRenderer, RejectsPointLightsAndMismatchedCameras) {

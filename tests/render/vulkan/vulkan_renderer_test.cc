@@ -12,8 +12,10 @@
 #include <memory>
 
 #include "engine/brdf/lafortune.h"
+#include "engine/mesh/height_field.h"
 #include "engine/mesh/ray_scene.h"
 #include "tests/render/vulkan/vulkan_test_util.h"
+#include "tests/support/height_scenes.h"
 #include "tests/support/shapes.h"
 
 namespace reflcap::render {
@@ -397,6 +399,71 @@ TEST_F(VulkanRendererScenes, NormalMapCaptureMatchesCpu) {
     }
     EXPECT_EQ(gpu->mask.data, cpu->mask.data);
   }
+}
+
+TEST_F(VulkanRendererScenes, NormalMapHeightFieldShadowsMatchCpu) {
+  // A glossy plate with a spherical pit, its height field integrated from the normal map, under
+  // low lights from several azimuths (diagonal ones march between pixel centres, through the
+  // bilinear taps). The march is float arithmetic in the same order on both sides (no fused
+  // multiply-add), so every pixel's shadow decision must agree exactly; the shading elsewhere to
+  // kRelTolerance as in NormalMapCaptureMatchesCpu.
+  const int w = 96, h = 90;
+  Image normals, mask;
+  reflcap::testing::NormalMapOf(reflcap::testing::PittedPlate(47, 44, 44, 37), w, h, &normals,
+                                &mask);
+  auto atlas = BuildNormalMapAtlas(normals, mask);
+  ASSERT_TRUE(atlas.ok()) << atlas.status().ToString();
+  const Camera cam = reflcap::testing::DiligentCamera(w, h);
+  auto field = IntegrateNormalMap(*atlas, cam);
+  ASSERT_TRUE(field.ok()) << field.status().ToString();
+  BrdfMaps maps;
+  maps.num_lobes = 1;
+  maps.texels.assign(atlas->TexelCount(), Glossy({0.4f, 0.3f, 0.2f}, 20));
+  ASSERT_TRUE(renderer().SetNormalMapScene(*atlas, maps, cam, &*field).ok());
+  for (int az = 0; az < 360; az += 45) {
+    SCOPED_TRACE(StrCat("azimuth ", az));
+    Light light;
+    light.type = LightType::kDirectional;
+    const double el = DegToRad(15 + az / 45 * 2);
+    light.direction = Vec3d(std::cos(el) * std::cos(DegToRad(az)),
+                            std::cos(el) * std::sin(DegToRad(az)), std::sin(el));
+    light.intensity = {3, 3, 3};
+    auto cpu = RenderNormalMapImage(*atlas, maps, cam, light, 0.7, WithAux(), &*field);
+    auto gpu = renderer().RenderNormalMapImage(cam, light, 0.7, WithAux());
+    ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.status().ToString();
+    size_t shadowed = 0, differ = 0;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const float c = cpu->aux.at(x, y, kAuxCastShadow), g = gpu->aux.at(x, y, kAuxCastShadow);
+        shadowed += c > 0.5f;
+        differ += (c > 0.5f) != (g > 0.5f);
+        if (c > 0.5f) {
+          ASSERT_EQ(gpu->pixels.at(x, y, 0), 0.0f) << "shadowed pixels are black";
+        }
+      }
+    }
+    EXPECT_GT(shadowed, 300u) << "the pit must shadow itself under a low light";
+    EXPECT_EQ(differ, 0u) << "shadow decisions differ (of " << shadowed << " shadowed)";
+    const RelativeCheck rc = CompareInterior(*cpu, *gpu);
+    EXPECT_EQ(rc.failed, 0u) << "worst " << rc.worst;
+    EXPECT_EQ(gpu->mask.data, cpu->mask.data);
+  }
+  // cast_shadows off: no march on either side.
+  Light light;
+  light.type = LightType::kDirectional;
+  light.direction = Vec3d(0.9, 0, 0.3).normalized();
+  RenderOptions off = WithAux();
+  off.cast_shadows = false;
+  auto gpu = renderer().RenderNormalMapImage(cam, light, 1, off);
+  auto cpu = RenderNormalMapImage(*atlas, maps, cam, light, 1, off, &*field);
+  ASSERT_TRUE(cpu.ok() && gpu.ok());
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      ASSERT_EQ(gpu->aux.at(x, y, kAuxCastShadow), 0.0f);
+      ASSERT_EQ(cpu->aux.at(x, y, kAuxCastShadow), 0.0f);
+    }
+  }
+  EXPECT_EQ(CompareInterior(*cpu, *gpu).failed, 0u);
 }
 
 TEST_F(VulkanRendererScenes, RefusesWhatTheCpuRefuses) {
