@@ -35,7 +35,29 @@ int RunInfo(int argc, char** argv) {
     return kExitUsage;
   }
   auto capture = ReadCapture(path);
-  if (!capture.ok()) return ReportError("info", capture.status());
+  if (!capture.ok()) {
+    // A rig skeleton (reflcap calibrate turntable without --capture) is not a capture yet, but
+    // its cameras and turntable are checked and summarised; anything else is the capture error.
+    auto rig = ReadRig(path);
+    if (!rig.ok() || !rig->IsRig()) return ReportError("info", capture.status());
+    const Capture& c = *rig;
+    std::printf("rig         %s (capture/1.%d skeleton: cameras and turntable; %s)\n",
+                c.json_path.string().c_str(), c.minor_version,
+                "add lights, a mesh or normal map and images to make it a capture");
+    std::printf("cameras     %zu\n", c.cameras.size());
+    for (const Camera& cam : c.cameras) std::printf("  %s\n", cam.ToString().c_str());
+    if (c.turntable) {
+      std::printf("turntable   axis [%g %g %g] through [%g %g %g]\n", c.turntable->axis.x(),
+                  c.turntable->axis.y(), c.turntable->axis.z(), c.turntable->point.x(),
+                  c.turntable->point.y(), c.turntable->point.z());
+    } else {
+      std::printf("turntable   none (fixed object)\n");
+    }
+    std::printf("lights      %zu\nimages      %zu\ngeometry    %s\n", c.lights.size(),
+                c.images.size(), !c.mesh.empty() ? c.mesh.c_str() : c.normal_map ? "normal map" : "none");
+    std::printf("as capture  not yet: %s\n", capture.status().message().c_str());
+    return 0;
+  }
   CaptureFilesReport files;
   REFLCAP_LOG(kInfo) << "checking " << capture->images.size() << " image headers and the geometry";
   if (Status s = ValidateCaptureFiles(*capture, &files); !s.ok()) return ReportError("info", s);

@@ -404,7 +404,9 @@ size_t Capture::CountSplit(Split split) const {
   return n;
 }
 
-StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
+namespace {
+
+StatusOr<Capture> ParseCaptureDocument(const std::string& text, const fs::path& name, bool rig) {
   const std::string file = name.string();
   FieldReader r(file);
   Json root;
@@ -437,8 +439,19 @@ StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
   }
   REFLCAP_RETURN_IF_ERROR(CheckUniqueIds(r, ids, "cameras"));
 
-  REFLCAP_ASSIGN_OR_RETURN(const Json* lights, r.Required(root, "", "lights"));
-  if (!lights->is_array() || lights->empty()) return r.Error("lights", "must be a non-empty array");
+  // A rig (what `reflcap calibrate turntable` writes without --capture) may lack the lights, the
+  // geometry and the images; whatever it has is checked as in a capture.
+  const bool no_lights = rig && !root.contains("lights");
+  const Json no_list = Json::array();
+  const Json* lights = &no_list;
+  if (!rig && !root.contains("lights") && root.contains("calibration")) {
+    return r.Error("lights", "missing: this is a rig skeleton (reflcap calibrate turntable); add "
+                             "lights, a mesh or normal map and images, or calibrate with --capture");
+  }
+  if (!no_lights) {
+    REFLCAP_ASSIGN_OR_RETURN(lights, r.Required(root, "", "lights"));
+    if (!lights->is_array() || lights->empty()) return r.Error("lights", "must be a non-empty array");
+  }
   ids.clear();
   for (size_t i = 0; i < lights->size(); ++i) {
     REFLCAP_ASSIGN_OR_RETURN(Light light, ParseLight(r, (*lights)[i], StrCat("lights[", i, "]")));
@@ -449,13 +462,13 @@ StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
 
   const bool has_mesh = root.contains("mesh");
   const bool has_normal_map = root.contains("normal_map");
-  if (has_mesh == has_normal_map) {
+  if (has_mesh == has_normal_map && !(rig && !has_mesh)) {
     return r.Error(has_mesh ? "mesh" : "(root)",
                    "exactly one of \"mesh\" and \"normal_map\" must be given");
   }
   if (has_mesh) {
     REFLCAP_ASSIGN_OR_RETURN(capture.mesh, r.String(root["mesh"], "mesh"));
-  } else {
+  } else if (has_normal_map) {
     const Json& nm = root["normal_map"];
     if (!nm.is_object()) return r.Error("normal_map", "must be an object");
     NormalMapGeometry g;
@@ -480,9 +493,12 @@ StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
     capture.turntable = t;
   }
 
-  REFLCAP_ASSIGN_OR_RETURN(const Json* images, r.Required(root, "", "images"));
-  if (!images->is_array()) return r.Error("images", "must be an array");
-  if (images->empty()) return r.Error("images", "the image list is empty");
+  const Json* images = &no_list;
+  if (!(rig && !root.contains("images"))) {
+    REFLCAP_ASSIGN_OR_RETURN(images, r.Required(root, "", "images"));
+    if (!images->is_array()) return r.Error("images", "must be an array");
+    if (images->empty()) return r.Error("images", "the image list is empty");
+  }
   for (size_t i = 0; i < images->size(); ++i) {
     const std::string at = StrCat("images[", i, "]");
     REFLCAP_ASSIGN_OR_RETURN(CaptureImage image, ParseImage(r, (*images)[i], at, capture));
@@ -496,12 +512,30 @@ StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
   return capture;
 }
 
-StatusOr<Capture> ReadCapture(const fs::path& json_path) {
+StatusOr<std::string> ReadCaptureText(const fs::path& json_path, fs::path* file) {
   std::error_code ec;
-  if (fs::is_directory(json_path, ec)) return ReadCapture(json_path / "capture.json");
-  auto text = ReadTextFile(json_path);
-  if (!text.ok()) return NotFoundError(json_path.string(), ": cannot open capture file");
-  return ParseCapture(*text, json_path);
+  *file = fs::is_directory(json_path, ec) ? json_path / "capture.json" : json_path;
+  auto text = ReadTextFile(*file);
+  if (!text.ok()) return NotFoundError(file->string(), ": cannot open capture file");
+  return text;
+}
+
+}  // namespace
+
+StatusOr<Capture> ParseCapture(const std::string& text, const fs::path& name) {
+  return ParseCaptureDocument(text, name, /*rig=*/false);
+}
+
+StatusOr<Capture> ReadRig(const fs::path& json_path) {
+  fs::path file;
+  REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadCaptureText(json_path, &file));
+  return ParseCaptureDocument(text, file, /*rig=*/true);
+}
+
+StatusOr<Capture> ReadCapture(const fs::path& json_path) {
+  fs::path file;
+  REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadCaptureText(json_path, &file));
+  return ParseCapture(text, file);
 }
 
 Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) {

@@ -75,10 +75,16 @@ struct Capture {
   int FindCamera(const std::string& id) const;  // -1 when absent
   int FindLight(const std::string& id) const;
   size_t CountSplit(Split split) const;
+  // True for a rig skeleton (ReadRig): no lights, no geometry or no images.
+  bool IsRig() const { return lights.empty() || images.empty() || (mesh.empty() && !normal_map); }
 };
 
 // Parses and validates capture.json (fields only; no other file is opened).
 StatusOr<Capture> ReadCapture(const std::filesystem::path& json_path);
+// Reads a rig: a capture/1 document that may lack the lights, the geometry (mesh or normal map)
+// and the images — the skeleton `reflcap calibrate turntable` writes. Every field it has is
+// checked as ReadCapture checks it. Capture::IsRig() tells a skeleton from a full capture.
+StatusOr<Capture> ReadRig(const std::filesystem::path& json_path);
 // Parses capture JSON text; `name` is used in messages in place of a file name.
 StatusOr<Capture> ParseCapture(const std::string& text, const std::filesystem::path& name);
 

@@ -144,6 +144,16 @@ TEST(CalibrateCli, CalibratesARenderedSessionEndToEnd) {
   for (const char* f : {"index.html", "report.json", "residuals_cam0.png", "residuals_cam1.png"}) {
     EXPECT_TRUE(fs::exists(dir / "rig_report" / f)) << f;
   }
+  // The skeleton: `info` checks and summarises it as a rig (exit 0); `resample` refuses it (exit
+  // 2), saying what it is.
+  r = RunCli("info " + rig.string(), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("skeleton"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("cameras     2"), std::string::npos) << r.out;
+  r = RunCli("resample " + rig.string() + " --out " + (dir / "samples").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("rig skeleton"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "samples"));
   // An existing output is kept unless --overwrite.
   r = RunCli(StrCat("calibrate turntable ", Session().string(), " --out ", rig.string()), dir);
   EXPECT_EQ(r.exit_code, 2);

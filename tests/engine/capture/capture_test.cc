@@ -140,6 +140,35 @@ TEST_F(CaptureFixture, CorruptImageNamesFileAndField) {
   ExpectError({"images[1].file", "1.exr"});
 }
 
+// The skeleton `reflcap calibrate turntable` writes without --capture: cameras, turntable and a
+// calibration block. ReadRig checks what it has; ReadCapture refuses it, saying what it is.
+TEST_F(CaptureFixture, RigSkeletonReadsAsARigNotAsACapture) {
+  json_.erase("lights");
+  json_.erase("images");
+  json_.erase("mesh");
+  json_["calibration"] = {{"format", "reflcap-rig/1"}};
+  testing::WriteText(path(), json_.dump(2));
+  auto rig = ReadRig(dir_.path());
+  ASSERT_TRUE(rig.ok()) << rig.status().ToString();
+  EXPECT_TRUE(rig->IsRig());
+  EXPECT_EQ(rig->cameras.size(), 2u);
+  ASSERT_TRUE(rig->turntable.has_value());
+  EXPECT_TRUE(rig->lights.empty() && rig->images.empty() && rig->mesh.empty());
+  ExpectError({"lights", "rig skeleton", "--capture"});
+  // Whatever the rig has is checked as in a capture.
+  json_["cameras"][1]["K"] = Json::parse("[[0,0,3.5],[0,12,2.5],[0,0,1]]");
+  testing::WriteText(path(), json_.dump(2));
+  auto bad = ReadRig(path());
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("cameras[1].K"), std::string::npos) << bad.status().message();
+  // A full capture read as a rig is not a rig.
+  SetUp();
+  testing::WriteText(path(), json_.dump(2));
+  auto full = ReadRig(path());
+  ASSERT_TRUE(full.ok()) << full.status().ToString();
+  EXPECT_FALSE(full->IsRig());
+}
+
 TEST_F(CaptureFixture, MissingMeshNamesField) {
   json_["mesh"] = "nope.obj";
   ExpectError({"mesh", "nope.obj"});
