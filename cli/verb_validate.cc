@@ -35,11 +35,14 @@ int RunValidate(int argc, char** argv) {
   ArgParser args(
       "validate", "CAPTURE RENDERS --out REPORT [--split holdout|train|all] [--fit FIT] [--samples SAMPLES]",
       "Compare re-renders (from reflcap render) with the photographs, on the object mask eroded\n"
-      "by 2 px: HDR PSNR (peak = the photograph's max), relative RMSE and SSIM on tone-mapped\n"
+      "by 2 px: HDR PSNR (peak = the photograph's max), PSNR-L (LDR: both images over the\n"
+      "photograph's 99th percentile, clipped, sRGB), relative RMSE and SSIM on tone-mapped\n"
       "images, raw and with a per-channel least-squares scale (Stanford-ORB), per image, pooled\n"
-      "and by region (shadow_edge, high_curvature, grazing, elsewhere), with the PSNR the\n"
-      "capture's noise allows when it is known. Writes REPORT/metrics.json, REPORT/figures/ and\n"
-      "REPORT/report.html (definitions in README.md).");
+      "and by region (shadow_edge, high_curvature, grazing, elsewhere), the share of the squared\n"
+      "error in the worst 0.1 % and 1 % of pixels and the worst pixels themselves, with the PSNR\n"
+      "the capture's noise allows when it is known. Writes REPORT/metrics.json, REPORT/figures/\n"
+      "and REPORT/report.html (with the fit's status, model and cluster maps given --fit;\n"
+      "definitions in README.md).");
   args.AddPositional("CAPTURE", &capture_path, "capture.json, or the folder holding it");
   args.AddPositional("RENDERS", &renders, "output folder of reflcap render");
   args.AddString("out", &out, "REPORT", "output folder (must not exist or be empty)");
