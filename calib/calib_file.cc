@@ -6,14 +6,14 @@
 #include <cmath>
 #include <set>
 
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 #include "engine/core/atomic_file.h"
 #include "engine/image/image_io.h"
 
 namespace reflcap::calib {
 namespace fs = std::filesystem;
-using internal::FieldReader;
-using internal::Json;
+using jsonio::FieldReader;
+using jsonio::Json;
 
 namespace {
 
@@ -36,24 +36,7 @@ bool SameAngle(double a_deg, double b_deg) {
 }
 
 StatusOr<int> ParseFormat(const FieldReader& r, const Json& root) {
-  REFLCAP_ASSIGN_OR_RETURN(const Json* f, r.Required(root, "", "format"));
-  REFLCAP_ASSIGN_OR_RETURN(std::string format, r.String(*f, "format"));
-  const std::string prefix = "calib/";
-  if (format.rfind(prefix, 0) != 0) {
-    return r.Error("format", StrCat("\"", format, "\" is not a calibration format (expected \"calib/1\")"));
-  }
-  const std::string version = format.substr(prefix.size());
-  const size_t dot = version.find('.');
-  const std::string major = version.substr(0, dot);
-  if (major != "1") {
-    return r.Error("format", StrCat("unsupported version \"", version, "\" (this reader reads calib/1)"));
-  }
-  if (dot == std::string::npos) return 0;
-  const std::string minor = version.substr(dot + 1);
-  if (minor.empty() || minor.find_first_not_of("0123456789") != std::string::npos || minor.size() > 6) {
-    return r.Error("format", StrCat("malformed version \"", format, "\""));
-  }
-  return std::stoi(minor);
+  return r.FormatMinorVersion(root, "calib", "a calibration format");
 }
 
 StatusOr<CalibCamera> ParseCamera(const FieldReader& r, const Json& j, const std::string& at) {
@@ -134,11 +117,11 @@ StatusOr<BoardSpec> ParseFace(const FieldReader& r, const Json& j, const std::st
   REFLCAP_ASSIGN_OR_RETURN(b.u_axis, r.UnitVector3(*u, at + ".u_axis"));
   REFLCAP_ASSIGN_OR_RETURN(const Json* v, r.Required(j, at, "v_axis"));
   REFLCAP_ASSIGN_OR_RETURN(b.v_axis, r.UnitVector3(*v, at + ".v_axis"));
-  if (std::abs(b.u_axis.dot(b.v_axis)) > internal::kUnitTolerance) {
+  if (std::abs(b.u_axis.dot(b.v_axis)) > jsonio::kUnitTolerance) {
     return r.Error(at + ".v_axis", "must be perpendicular to u_axis");
   }
   // The corner rule: seen from outside u points right and v down, so u x v is the inward normal.
-  if ((b.u_axis.cross(b.v_axis) + b.normal).norm() > 10 * internal::kUnitTolerance) {
+  if ((b.u_axis.cross(b.v_axis) + b.normal).norm() > 10 * jsonio::kUnitTolerance) {
     return r.Error(at + ".normal", "must equal -(u_axis x v_axis) (u right and v down seen from outside)");
   }
   REFLCAP_ASSIGN_OR_RETURN(const Json* o, r.Required(j, at, "first_inner_corner_box"));
@@ -261,7 +244,7 @@ int CalibFile::FindCamera(const std::string& id) const {
 
 StatusOr<CalibFile> ParseCalibFile(const std::string& text, const fs::path& name) {
   const FieldReader r(name.string());
-  REFLCAP_ASSIGN_OR_RETURN(Json root, internal::ParseJsonObject(text, name.string()));
+  REFLCAP_ASSIGN_OR_RETURN(Json root, jsonio::ParseJsonObject(text, name.string()));
   CalibFile file;
   file.json_path = name;
   REFLCAP_ASSIGN_OR_RETURN(file.minor_version, ParseFormat(r, root));

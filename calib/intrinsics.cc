@@ -11,7 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "calib/board_cost.h"
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 #include "calib/solver_util.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
@@ -22,9 +22,9 @@ namespace reflcap::calib {
 namespace {
 
 using internal::BoardCornerCost;
-using internal::FieldReader;
+using jsonio::FieldReader;
 using internal::ProjectBoardCorner;
-using internal::Json;
+using jsonio::Json;
 
 // Rounds of adjust -> reject outliers -> adjust; rejections stop long before (each round removes
 // only what is far out, and the survivors fit better).
@@ -454,13 +454,13 @@ std::string IntrinsicsToJson(const CalibFile& file, const IntrinsicsResult& resu
   for (const IntrinsicsCameraResult& c : result.cameras) {
     const CameraIntrinsics& in = c.intrinsics;
     Json j = {{"id", in.id}, {"width", in.width}, {"height", in.height}};
-    j["K"] = internal::MatrixJson(KFromParams(in.params));
+    j["K"] = jsonio::MatrixJson(KFromParams(in.params));
     const auto dist = DistFromParams(in.params);
     j["dist"] = Json(std::vector<double>(dist.begin(), dist.end()));
     Json sigma = Json::object();
     for (int i = 0; i < kIntrinsicCount; ++i) sigma[IntrinsicName(i)] = in.sigma[i];
     j["sigma"] = sigma;
-    if (in.covariance) j["covariance"] = internal::MatrixJson(*in.covariance);
+    if (in.covariance) j["covariance"] = jsonio::MatrixJson(*in.covariance);
     j["rms_px"] = c.rms_px;
     j["max_px"] = c.max_px;
     j["residual_sigma_px"] = c.residual_sigma_px;
@@ -486,7 +486,7 @@ std::string IntrinsicsToJson(const CalibFile& file, const IntrinsicsResult& resu
       j["max_px"] = v.max_px;
       j["corners_used"] = v.corners_used;
       j["corners_rejected"] = v.corners_rejected;
-      j["cam_from_board"] = internal::MatrixJson(v.cam_from_board.ToMatrix());
+      j["cam_from_board"] = jsonio::MatrixJson(v.cam_from_board.ToMatrix());
     }
     views.push_back(j);
   }
@@ -499,7 +499,7 @@ StatusOr<std::vector<CameraIntrinsics>> ReadIntrinsicsFile(const std::filesystem
   auto text = ReadTextFile(path);
   if (!text.ok()) return NotFoundError(path.string(), ": cannot open intrinsics file");
   const FieldReader r(path.string());
-  REFLCAP_ASSIGN_OR_RETURN(Json root, internal::ParseJsonObject(*text, path.string()));
+  REFLCAP_ASSIGN_OR_RETURN(Json root, jsonio::ParseJsonObject(*text, path.string()));
   REFLCAP_ASSIGN_OR_RETURN(const Json* format, r.Required(root, "", "format"));
   REFLCAP_ASSIGN_OR_RETURN(std::string f, r.String(*format, "format"));
   if (f != "reflcap-intrinsics/1") {

@@ -8,14 +8,14 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 #include "calib/report_json.h"
 #include "engine/core/atomic_file.h"
 #include "engine/image/png_io.h"
 
 namespace reflcap::calib {
 namespace fs = std::filesystem;
-using internal::Json;
+using jsonio::Json;
 
 namespace {
 

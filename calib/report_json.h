@@ -4,10 +4,14 @@
 #include <string>
 
 #include "calib/calib_file.h"
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 #include "calib/turntable.h"
 
 namespace reflcap::calib::internal {
+
+using jsonio::Json;
+using jsonio::MatrixJson;
+using jsonio::VectorJson;
 
 // The summary: source, gauge, intrinsics provenance, reprojection, sigmas, cuboid pose, angle
 // offsets, the baseline and the comparison with ground truth (when the file has it).

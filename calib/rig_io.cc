@@ -1,11 +1,11 @@
 #include "calib/rig_io.h"
 
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 #include "calib/report_json.h"
 
 namespace reflcap::calib {
 namespace fs = std::filesystem;
-using internal::Json;
+using jsonio::Json;
 
 std::vector<Camera> RigCameras(const CalibFile& file, const TurntableResult& result) {
   std::vector<Camera> cameras;
@@ -32,13 +32,13 @@ std::string RigToJson(const CalibFile& file, const TurntableResult& result, cons
     cameras.push_back({{"id", cam.id},
                        {"width", cam.width},
                        {"height", cam.height},
-                       {"K", internal::MatrixJson(cam.K)},
+                       {"K", jsonio::MatrixJson(cam.K)},
                        {"dist", Json(std::vector<double>(cam.dist.begin(), cam.dist.end()))},
-                       {"cam_from_world", internal::MatrixJson(cam.cam_from_world.ToMatrix())}});
+                       {"cam_from_world", jsonio::MatrixJson(cam.cam_from_world.ToMatrix())}});
   }
   root["cameras"] = cameras;
   const Turntable t = RigTurntable(result);
-  root["turntable"] = {{"axis", internal::VectorJson(t.axis)}, {"point", internal::VectorJson(t.point)}};
+  root["turntable"] = {{"axis", jsonio::VectorJson(t.axis)}, {"point", jsonio::VectorJson(t.point)}};
   root["calibration"] = internal::CalibrationJson(file, result, options, provenance.intrinsics, provenance.report);
   return root.dump(2) + "\n";
 }

@@ -1,5 +1,6 @@
-// capture/1 reader, validator and writer. Parsing uses nlohmann::json; a small FieldReader carries
-// the file name and the JSON path ("images[3].exposure_s") so that every message names both.
+// capture/1 reader, validator and writer. Parsing uses the shared field reader
+// (engine/capture/json_fields.h), which carries the file name and the JSON path
+// ("images[3].exposure_s") so that every message names both; writing uses nlohmann::json.
 // Validation is complete and eager: the first problem found is returned.
 #include "engine/capture/capture.h"
 
@@ -10,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/capture/json_fields.h"
 #include "engine/core/atomic_file.h"
 #include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
@@ -18,179 +20,23 @@
 
 namespace reflcap {
 namespace fs = std::filesystem;
-using Json = nlohmann::json;
+// Reading: the field reader's (insertion-ordered) JSON; writing: nlohmann::json (sorted keys).
+using Json = jsonio::Json;
+using OutJson = nlohmann::json;
 
 namespace {
 
-// Unit vectors in a file are written with >= 6 significant digits; 1e-4 accepts that rounding and
-// rejects anything a user meant as non-unit.
-constexpr double kUnitTolerance = 1e-4;
-// Rotation matrices: |RᵀR - I| and |det R - 1| below this (same rounding argument, 3x3 products).
+// Rotation matrices: |RᵀR - I| and |det R - 1| below this (a file's >= 6 significant digits,
+// 3x3 products).
 constexpr double kRotationTolerance = 1e-4;
 // |fx fy| below this (pixels²) makes K numerically singular.
 constexpr double kMinFocalProduct = 1e-12;
 
-// JSON has no literal for infinity; a number too large for a double (1e999) is how a non-finite
-// value reaches a file. nlohmann rejects it without naming a field, so before parsing such
-// tokens are replaced by a marker string that FieldReader reports against the field.
-constexpr char kNonFiniteMarkerJson[] = "\\u0001non-finite:";  // as written into the JSON text
-constexpr char kNonFiniteMarker[] = "\x01non-finite:";          // as the parsed string holds it
-
-std::string MarkNonFiniteNumbers(const std::string& text) {
-  std::string out;
-  out.reserve(text.size());
-  bool in_string = false;
-  for (size_t i = 0; i < text.size(); ++i) {
-    const char c = text[i];
-    if (in_string) {
-      out += c;
-      if (c == '\\' && i + 1 < text.size()) {
-        out += text[++i];
-      } else if (c == '"') {
-        in_string = false;
-      }
-      continue;
-    }
-    if (c == '"') {
-      in_string = true;
-      out += c;
-      continue;
-    }
-    if (c == '-' || (c >= '0' && c <= '9')) {
-      size_t end = i + 1;
-      while (end < text.size() && std::strchr("0123456789+-.eE", text[end])) ++end;
-      const std::string token = text.substr(i, end - i);
-      const double v = std::strtod(token.c_str(), nullptr);
-      out += std::isfinite(v) ? token : StrCat("\"", kNonFiniteMarkerJson, token, "\"");
-      i = end - 1;
-      continue;
-    }
-    out += c;
-  }
-  return out;
-}
-
-bool IsNonFinite(const Json& value) {
-  return value.is_string() && value.get<std::string>().rfind(kNonFiniteMarker, 0) == 0;
-}
-
-std::string NonFiniteToken(const Json& value) {
-  return value.get<std::string>().substr(sizeof(kNonFiniteMarker) - 1);
-}
-
-class FieldReader {
- public:
-  FieldReader(std::string file) : file_(std::move(file)) {}
-
-  Status Error(const std::string& field, const std::string& what) const {
-    return InvalidArgumentError(file_, ": ", field, ": ", what);
-  }
-
-  // Looks up a required member of `object`.
-  StatusOr<const Json*> Required(const Json& object, const std::string& parent,
-                                 const std::string& key) const {
-    auto it = object.find(key);
-    if (it == object.end()) return Error(Join(parent, key), "missing");
-    return &*it;
-  }
-
-  StatusOr<double> Number(const Json& value, const std::string& field) const {
-    if (IsNonFinite(value)) return Error(field, StrCat("must be finite (got ", NonFiniteToken(value), ")"));
-    if (!value.is_number()) return Error(field, "must be a number");
-    const double v = value.get<double>();
-    if (!std::isfinite(v)) return Error(field, "must be finite");
-    return v;
-  }
-
-  StatusOr<int> PositiveInt(const Json& value, const std::string& field) const {
-    if (!value.is_number_integer() || value.get<int64_t>() <= 0 ||
-        value.get<int64_t>() > (1 << 20)) {
-      return Error(field, "must be a positive integer");
-    }
-    return static_cast<int>(value.get<int64_t>());
-  }
-
-  StatusOr<std::string> String(const Json& value, const std::string& field) const {
-    if (!value.is_string()) return Error(field, "must be a string");
-    std::string s = value.get<std::string>();
-    if (s.empty()) return Error(field, "must not be empty");
-    return s;
-  }
-
-  StatusOr<Vec3d> Vector3(const Json& value, const std::string& field) const {
-    if (!value.is_array() || value.size() != 3) return Error(field, "must be an array of 3 numbers");
-    Vec3d v;
-    for (int i = 0; i < 3; ++i) {
-      if (IsNonFinite(value[i])) {
-        return Error(field, StrCat("component ", i, " is not finite (", NonFiniteToken(value[i]), ")"));
-      }
-      if (!value[i].is_number()) return Error(field, "must be an array of 3 numbers");
-      v[i] = value[i].get<double>();
-      if (!std::isfinite(v[i])) return Error(field, StrCat("component ", i, " is not finite"));
-    }
-    return v;
-  }
-
-  StatusOr<Vec3d> UnitVector3(const Json& value, const std::string& field) const {
-    REFLCAP_ASSIGN_OR_RETURN(Vec3d v, Vector3(value, field));
-    if (std::abs(v.norm() - 1) > kUnitTolerance) {
-      return Error(field, StrCat("must be a unit vector (length is ", v.norm(), ")"));
-    }
-    return v.normalized();
-  }
-
-  template <int R, int C>
-  StatusOr<Eigen::Matrix<double, R, C>> Matrix(const Json& value, const std::string& field) const {
-    const std::string shape = StrCat("must be a ", R, "x", C, " array of numbers (rows)");
-    if (!value.is_array() || value.size() != R) return Error(field, shape);
-    Eigen::Matrix<double, R, C> m;
-    for (int r = 0; r < R; ++r) {
-      if (!value[r].is_array() || value[r].size() != C) return Error(field, shape);
-      for (int c = 0; c < C; ++c) {
-        if (IsNonFinite(value[r][c])) {
-          return Error(field, StrCat("element [", r, "][", c, "] is not finite (",
-                                     NonFiniteToken(value[r][c]), ")"));
-        }
-        if (!value[r][c].is_number()) return Error(field, shape);
-        m(r, c) = value[r][c].get<double>();
-        if (!std::isfinite(m(r, c))) return Error(field, StrCat("element [", r, "][", c, "] is not finite"));
-      }
-    }
-    return m;
-  }
-
-  static std::string Join(const std::string& parent, const std::string& key) {
-    return parent.empty() ? key : parent + "." + key;
-  }
-
- private:
-  std::string file_;
-};
+using jsonio::FieldReader;
 
 // "capture/1" -> minor 0, "capture/1.2" -> minor 2; anything else is an error naming `format`.
 StatusOr<int> ParseFormat(const FieldReader& r, const Json& root) {
-  REFLCAP_ASSIGN_OR_RETURN(const Json* f, r.Required(root, "", "format"));
-  REFLCAP_ASSIGN_OR_RETURN(std::string format, r.String(*f, "format"));
-  const std::string prefix = "capture/";
-  if (format.rfind(prefix, 0) != 0) {
-    return r.Error("format", StrCat("\"", format, "\" is not a capture format (expected \"capture/1\")"));
-  }
-  const std::string version = format.substr(prefix.size());
-  const size_t dot = version.find('.');
-  const std::string major = version.substr(0, dot);
-  if (major.empty() || major.find_first_not_of("0123456789") != std::string::npos) {
-    return r.Error("format", StrCat("malformed version \"", format, "\""));
-  }
-  if (major != "1") {
-    return r.Error("format", StrCat("unsupported major version ", major,
-                                    " (this reflcap reads capture/1)"));
-  }
-  if (dot == std::string::npos) return 0;
-  const std::string minor = version.substr(dot + 1);
-  if (minor.empty() || minor.find_first_not_of("0123456789") != std::string::npos) {
-    return r.Error("format", StrCat("malformed version \"", format, "\""));
-  }
-  return std::stoi(minor);
+  return r.FormatMinorVersion(root, "capture", "a capture format");
 }
 
 StatusOr<Camera> ParseCamera(const FieldReader& r, const Json& j, const std::string& at) {
@@ -209,7 +55,7 @@ StatusOr<Camera> ParseCamera(const FieldReader& r, const Json& j, const std::str
   if (model == "pinhole") {
     cam.model = CameraModel::kPinhole;
     REFLCAP_ASSIGN_OR_RETURN(const Json* k, r.Required(j, at, "K"));
-    REFLCAP_ASSIGN_OR_RETURN(cam.K, (r.Matrix<3, 3>(*k, at + ".K")));
+    REFLCAP_ASSIGN_OR_RETURN(cam.K, (r.Matrix(*k, 3, 3, at + ".K")));
     if (cam.K(1, 0) != 0 || cam.K(2, 0) != 0 || cam.K(2, 1) != 0 || cam.K(2, 2) != 1) {
       return r.Error(at + ".K", "must have the form [[fx,s,cx],[0,fy,cy],[0,0,1]]");
     }
@@ -242,7 +88,7 @@ StatusOr<Camera> ParseCamera(const FieldReader& r, const Json& j, const std::str
     }
   }
   REFLCAP_ASSIGN_OR_RETURN(const Json* m, r.Required(j, at, "cam_from_world"));
-  REFLCAP_ASSIGN_OR_RETURN(Mat4d mat, (r.Matrix<4, 4>(*m, at + ".cam_from_world")));
+  REFLCAP_ASSIGN_OR_RETURN(Mat4d mat, (r.Matrix(*m, 4, 4, at + ".cam_from_world")));
   if ((mat.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 0) {
     return r.Error(at + ".cam_from_world", "last row must be [0,0,0,1]");
   }
@@ -351,20 +197,6 @@ std::string JoinChannelNames(const std::vector<std::string>& names) {
   return out;
 }
 
-// 1-based line and column of a byte offset.
-void LineAndColumn(const std::string& text, size_t byte, size_t* line, size_t* column) {
-  *line = 1;
-  *column = 1;
-  for (size_t i = 0; i < byte && i < text.size(); ++i) {
-    if (text[i] == '\n') {
-      ++*line;
-      *column = 1;
-    } else {
-      ++*column;
-    }
-  }
-}
-
 Status CheckUniqueIds(const FieldReader& r, const std::vector<std::string>& ids,
                       const std::string& array) {
   std::set<std::string> seen;
@@ -409,20 +241,7 @@ namespace {
 StatusOr<Capture> ParseCaptureDocument(const std::string& text, const fs::path& name, bool rig) {
   const std::string file = name.string();
   FieldReader r(file);
-  Json root;
-  try {
-    root = Json::parse(MarkNonFiniteNumbers(text));
-  } catch (const Json::parse_error& e) {
-    size_t line, column;
-    LineAndColumn(text, e.byte > 0 ? e.byte - 1 : 0, &line, &column);
-    std::string what = e.what();
-    // nlohmann prefixes "[json.exception.parse_error.101] parse error at line L, column C: ".
-    const size_t colon = what.find(": ");
-    if (colon != std::string::npos) what = what.substr(colon + 2);
-    return InvalidArgumentError(file, ":", line, ":", column, ": JSON syntax error: ", what);
-  } catch (const Json::exception& e) {
-    return InvalidArgumentError(file, ": JSON error: ", e.what());
-  }
+  REFLCAP_ASSIGN_OR_RETURN(Json root, jsonio::ParseJsonObject(text, file));
   if (!root.is_object()) return r.Error("(root)", "must be a JSON object");
 
   Capture capture;
@@ -662,20 +481,20 @@ StatusOr<Image> ReadVarianceImage(const Capture& capture, size_t index) {
 }
 
 namespace {
-Json MatrixJson(const Eigen::MatrixXd& m) {
-  Json rows = Json::array();
+OutJson MatrixJson(const Eigen::MatrixXd& m) {
+  OutJson rows = OutJson::array();
   for (int r = 0; r < m.rows(); ++r) {
-    Json row = Json::array();
+    OutJson row = OutJson::array();
     for (int c = 0; c < m.cols(); ++c) row.push_back(m(r, c));
     rows.push_back(row);
   }
   return rows;
 }
-Json VecJson(const Vec3d& v) { return Json::array({v.x(), v.y(), v.z()}); }
+OutJson VecJson(const Vec3d& v) { return OutJson::array({v.x(), v.y(), v.z()}); }
 }  // namespace
 
 std::string CaptureToJson(const Capture& capture) {
-  Json root = Json::object();
+  OutJson root = OutJson::object();
   root["format"] = capture.minor_version ? StrCat("capture/1.", capture.minor_version) : "capture/1";
   if (capture.normal_map) {
     const auto& g = *capture.normal_map;
@@ -685,23 +504,23 @@ std::string CaptureToJson(const Capture& capture) {
   } else {
     root["mesh"] = capture.mesh;
   }
-  Json cameras = Json::array();
+  OutJson cameras = OutJson::array();
   for (const Camera& cam : capture.cameras) {
-    Json j = {{"id", cam.id}, {"width", cam.width}, {"height", cam.height}};
+    OutJson j = {{"id", cam.id}, {"width", cam.width}, {"height", cam.height}};
     if (cam.model == CameraModel::kOrthographic) {
       j["model"] = "orthographic";
       if (cam.pixel_size_m > 0) j["pixel_size_m"] = cam.pixel_size_m;
     } else {
       j["K"] = MatrixJson(cam.K);
-      j["dist"] = Json(std::vector<double>(cam.dist.begin(), cam.dist.end()));
+      j["dist"] = OutJson(std::vector<double>(cam.dist.begin(), cam.dist.end()));
     }
     j["cam_from_world"] = MatrixJson(cam.cam_from_world.ToMatrix());
     cameras.push_back(j);
   }
   root["cameras"] = cameras;
-  Json lights = Json::array();
+  OutJson lights = OutJson::array();
   for (const Light& light : capture.lights) {
-    Json j = {{"id", light.id}};
+    OutJson j = {{"id", light.id}};
     if (light.type == LightType::kPoint) {
       j["type"] = "point";
       j["position"] = VecJson(light.position);
@@ -717,9 +536,9 @@ std::string CaptureToJson(const Capture& capture) {
     root["turntable"] = {{"axis", VecJson(capture.turntable->axis)},
                          {"point", VecJson(capture.turntable->point)}};
   }
-  Json images = Json::array();
+  OutJson images = OutJson::array();
   for (const CaptureImage& image : capture.images) {
-    Json j = {{"file", image.file},
+    OutJson j = {{"file", image.file},
               {"camera", capture.cameras[image.camera].id},
               {"light", capture.lights[image.light].id},
               {"turntable_deg", image.turntable_deg},
@@ -730,7 +549,7 @@ std::string CaptureToJson(const Capture& capture) {
     images.push_back(j);
   }
   root["images"] = images;
-  if (!capture.ground_truth_json.empty()) root["ground_truth"] = Json::parse(capture.ground_truth_json);
+  if (!capture.ground_truth_json.empty()) root["ground_truth"] = OutJson::parse(capture.ground_truth_json);
   return root.dump(2) + "\n";
 }
 

@@ -93,7 +93,7 @@ TEST(CalibFile, ReportsEveryMalformedFieldWithFileAndPath) {
   };
   const std::vector<Case> cases = {
       {"format", [](Json& j) { j["format"] = "capture/1"; }, "session/calib.json: format:"},
-      {"version", [](Json& j) { j["format"] = "calib/2"; }, "format: unsupported version"},
+      {"version", [](Json& j) { j["format"] = "calib/2"; }, "format: unsupported major version"},
       {"no cameras", [](Json& j) { j.erase("cameras"); }, "cameras: missing"},
       {"width", [](Json& j) { j["cameras"][1]["width"] = -3; }, "cameras[1].width: must be a positive integer"},
       {"K", [](Json& j) { j["cameras"][0]["K"][0][0] = 0; }, "cameras[0].K: focal lengths"},

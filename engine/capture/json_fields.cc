@@ -1,9 +1,9 @@
-#include "calib/json_fields.h"
+#include "engine/capture/json_fields.h"
 
 #include <cstdlib>
 #include <cstring>
 
-namespace reflcap::calib::internal {
+namespace reflcap::jsonio {
 namespace {
 
 // JSON has no literal for infinity: a number too large for a double (1e999) is how a non-finite
@@ -94,6 +94,32 @@ const Json* FieldReader::Optional(const Json& object, const std::string& key) {
   if (!object.is_object()) return nullptr;
   auto it = object.find(key);
   return it == object.end() ? nullptr : &*it;
+}
+
+StatusOr<int> FieldReader::FormatMinorVersion(const Json& root, const std::string& name,
+                                              const std::string& kind) const {
+  REFLCAP_ASSIGN_OR_RETURN(const Json* f, Required(root, "", "format"));
+  REFLCAP_ASSIGN_OR_RETURN(std::string format, String(*f, "format"));
+  const std::string prefix = name + "/";
+  if (format.rfind(prefix, 0) != 0) {
+    return Error("format", StrCat("\"", format, "\" is not ", kind, " (expected \"", name, "/1\")"));
+  }
+  const std::string version = format.substr(prefix.size());
+  const size_t dot = version.find('.');
+  const std::string major = version.substr(0, dot);
+  const auto digits = [](const std::string& t) {
+    // More than 6 digits is no version anyone wrote, and would overflow stoi.
+    return !t.empty() && t.size() <= 6 && t.find_first_not_of("0123456789") == std::string::npos;
+  };
+  if (!digits(major)) return Error("format", StrCat("malformed version \"", format, "\""));
+  if (major != "1") {
+    return Error("format", StrCat("unsupported major version ", major, " (this reflcap reads ", name,
+                                  "/1)"));
+  }
+  if (dot == std::string::npos) return 0;
+  const std::string minor = version.substr(dot + 1);
+  if (!digits(minor)) return Error("format", StrCat("malformed version \"", format, "\""));
+  return std::stoi(minor);
 }
 
 StatusOr<double> FieldReader::Number(const Json& value, const std::string& field) const {
@@ -250,4 +276,4 @@ Json VectorJson(const Eigen::VectorXd& v) {
   return out;
 }
 
-}  // namespace reflcap::calib::internal
+}  // namespace reflcap::jsonio

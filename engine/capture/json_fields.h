@@ -1,8 +1,9 @@
 #pragma once
-// Field-by-field JSON reading for calib/'s file formats (calib/1, reflcap-intrinsics/1): every
-// error names the file and the JSON path of the field ("images[3].turntable_deg"), as capture/1's
-// reader does (engine/capture/capture.cc). Internal to calib/: the public headers keep nlohmann
-// out of their includes.
+// Field-by-field JSON reading for reflcap's file formats (capture/1, calib/1,
+// reflcap-intrinsics/1): every error names the file and the JSON path of the field
+// ("images[3].turntable_deg"). Non-finite numbers (1e999: JSON has no literal for infinity) are
+// reported against their field, and syntax errors with line and column. For readers' .cc files
+// only: public headers keep nlohmann out of their includes.
 #include <array>
 #include <cmath>
 #include <string>
@@ -13,7 +14,7 @@
 #include "engine/core/status.h"
 #include "engine/math/types.h"
 
-namespace reflcap::calib::internal {
+namespace reflcap::jsonio {
 
 // Insertion-ordered, so that written files read in the order they are built.
 using Json = nlohmann::ordered_json;
@@ -41,6 +42,12 @@ class FieldReader {
                                  const std::string& key) const;
   // An optional member; nullptr when absent.
   static const Json* Optional(const Json& object, const std::string& key);
+
+  // The minor version of root's "format" = "<name>/1[.N]" (0 for "<name>/1"); any other name,
+  // major version or malformed version is an error naming the field. `kind` words the first
+  // ("a capture format").
+  StatusOr<int> FormatMinorVersion(const Json& root, const std::string& name,
+                                   const std::string& kind) const;
 
   StatusOr<double> Number(const Json& value, const std::string& field) const;
   StatusOr<double> PositiveNumber(const Json& value, const std::string& field) const;
@@ -72,4 +79,4 @@ constexpr double kRotationTolerance = 1e-4;
 Json MatrixJson(const Eigen::MatrixXd& m);
 Json VectorJson(const Eigen::VectorXd& v);
 
-}  // namespace reflcap::calib::internal
+}  // namespace reflcap::jsonio
