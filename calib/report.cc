@@ -11,6 +11,7 @@
 #include "engine/capture/json_fields.h"
 #include "calib/report_json.h"
 #include "engine/core/atomic_file.h"
+#include "engine/core/html.h"
 #include "engine/image/png_io.h"
 
 namespace reflcap::calib {
@@ -25,20 +26,6 @@ constexpr double kVectorP95Px = 20;
 constexpr double kCropPx = 900;
 constexpr char kAdjustedColour[] = "#d62728";
 constexpr char kBaselineColour[] = "#1f77b4";
-
-std::string Escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '&': out += "&amp;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
 
 std::string Fmt(double v, int digits = 3) {
   // No "-0.000": a value that rounds to zero prints as zero.
@@ -70,7 +57,7 @@ std::string SvgOpen(const std::string& title) {
   std::ostringstream o;
   o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << kPlotW << "' height='" << kPlotH
     << "' font-family='sans-serif' font-size='11'><rect width='100%' height='100%' fill='white'/>"
-    << "<text x='" << kPlotW / 2 << "' y='16' text-anchor='middle' font-size='13'>" << Escape(title) << "</text>";
+    << "<text x='" << kPlotW / 2 << "' y='16' text-anchor='middle' font-size='13'>" << HtmlEscape(title) << "</text>";
   return o.str();
 }
 
@@ -86,7 +73,7 @@ std::string YAxis(double y_max, const std::string& label) {
       << Fmt(v, y_max >= 50 ? 0 : y_max < 0.1 ? 3 : 2) << "</text>";
   }
   o << "<text transform='translate(12," << (kMarginT + h / 2) << ") rotate(-90)' text-anchor='middle'>"
-    << Escape(label) << "</text>";
+    << HtmlEscape(label) << "</text>";
   return o.str();
 }
 
@@ -109,16 +96,16 @@ std::string BarChart(const std::string& title, const std::string& y_label, const
       const double bh = h * v / y_max;
       const double x = kMarginL + g * group + group * 0.1 + s * bar;
       o << "<rect x='" << Fmt(x, 1) << "' y='" << Fmt(kPlotH - kMarginB - bh, 1) << "' width='" << Fmt(bar, 1)
-        << "' height='" << Fmt(bh, 1) << "' fill='" << series[s].colour << "'><title>" << Escape(series[s].name)
-        << " " << Escape(labels[g]) << ": " << Fmt(v, 4) << "</title></rect>";
+        << "' height='" << Fmt(bh, 1) << "' fill='" << series[s].colour << "'><title>" << HtmlEscape(series[s].name)
+        << " " << HtmlEscape(labels[g]) << ": " << Fmt(v, 4) << "</title></rect>";
     }
     o << "<text x='" << Fmt(kMarginL + (g + 0.5) * group, 1) << "' y='" << kPlotH - kMarginB + 14
-      << "' text-anchor='middle'>" << Escape(labels[g]) << "</text>";
+      << "' text-anchor='middle'>" << HtmlEscape(labels[g]) << "</text>";
   }
   int lx = kMarginL + 8;
   for (const Series& s : series) {
     o << "<rect x='" << lx << "' y='" << kPlotH - 18 << "' width='10' height='10' fill='" << s.colour
-      << "'/><text x='" << lx + 14 << "' y='" << kPlotH - 9 << "'>" << Escape(s.name) << "</text>";
+      << "'/><text x='" << lx + 14 << "' y='" << kPlotH - 9 << "'>" << HtmlEscape(s.name) << "</text>";
     lx += 20 + 7 * int(s.name.size());
   }
   o << "</svg>";
@@ -147,7 +134,7 @@ std::string Histogram(const std::string& title, const std::string& x_label, cons
     o << "<text x='" << Fmt(kMarginL + double(w) * i / 5, 1) << "' y='" << kPlotH - kMarginB + 14
       << "' text-anchor='middle'>" << Fmt(x_max * i / 5, 3) << "</text>";
   }
-  o << "<text x='" << kMarginL + w / 2 << "' y='" << kPlotH - 8 << "' text-anchor='middle'>" << Escape(x_label)
+  o << "<text x='" << kMarginL + w / 2 << "' y='" << kPlotH - 8 << "' text-anchor='middle'>" << HtmlEscape(x_label)
     << "</text></svg>";
   return o.str();
 }
@@ -317,14 +304,14 @@ Status WriteTurntableReport(const CalibFile& file, const TurntableResult& r, con
     const std::string png = StrCat("residuals_", file.cameras[c].id, ".png");
     REFLCAP_RETURN_IF_ERROR(WriteResidualPng(file.Resolve(file.images[photo].file), dv, scale, dir / png));
     images_html.push_back(StrCat("<figure style='display:inline-block;width:48%;margin:4px'><img src='", png,
-                                 "' style='max-width:100%'><figcaption>", Escape(file.images[photo].file),
+                                 "' style='max-width:100%'><figcaption>", HtmlEscape(file.images[photo].file),
                                  "</figcaption></figure>"));
   }
 
   std::ostringstream h;
   h << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>reflcap calibrate turntable</title>" << kStyle
-    << "</head><body><h1>Turntable calibration</h1><p class='note'>" << Escape(file.json_path.string())
-    << " &mdash; intrinsics: " << Escape(intrinsics_note) << "; detection " << Fmt(r.detect_s, 1)
+    << "</head><body><h1>Turntable calibration</h1><p class='note'>" << HtmlEscape(file.json_path.string())
+    << " &mdash; intrinsics: " << HtmlEscape(intrinsics_note) << "; detection " << Fmt(r.detect_s, 1)
     << " s, adjustment " << Fmt(r.solve_s, 1) << " s</p>";
   int used = 0;
   for (const FaceView& v : r.views) used += v.used;
@@ -361,7 +348,7 @@ Status WriteTurntableReport(const CalibFile& file, const TurntableResult& r, con
               Fmt(b->box_translation_median_mm, 4) + " / " + Fmt(b->box_translation_max_mm, 4)});
     for (size_t i = 0; i < a->intrinsics_error.size() && options.refine_intrinsics; ++i) {
       const auto& e = a->intrinsics_error[i];
-      h << Row({StrCat(Escape(file.cameras[i].id), ": fx, fy, cx, cy error (px)"),
+      h << Row({StrCat(HtmlEscape(file.cameras[i].id), ": fx, fy, cx, cy error (px)"),
                 Fmt(e[kFx], 2) + ", " + Fmt(e[kFy], 2) + ", " + Fmt(e[kCx], 2) + ", " + Fmt(e[kCy], 2), ""});
     }
     h << "</table>";
@@ -375,18 +362,18 @@ Status WriteTurntableReport(const CalibFile& file, const TurntableResult& r, con
     auto with_sigma = [&](int k) {
       return options.refine_intrinsics ? Fmt(p[k], 2) + " &plusmn; " + Fmt(r.sigma.intrinsics[c][k], 2) : Fmt(p[k], 2);
     };
-    h << Row({Escape(file.cameras[c].id),
+    h << Row({HtmlEscape(file.cameras[c].id),
               Fmt(centre.x(), 4) + ", " + Fmt(centre.y(), 4) + ", " + Fmt(centre.z(), 4),
               Fmt(r.per_camera[c].rms_px, 4), Fmt(r.per_camera[c].max_px, 3), Fmt(r.baseline_per_camera[c].rms_px, 4),
               std::to_string(r.per_camera[c].corners), Fmt(r.sigma.camera_rotation_deg[c].norm(), 5),
               Fmt(r.sigma.camera_centre_mm[c].norm(), 4), with_sigma(kFx), with_sigma(kFy), with_sigma(kCx),
               with_sigma(kCy)});
   }
-  h << "</table><p class='note'>Sigmas relative to camera " << Escape(file.cameras[0].id)
+  h << "</table><p class='note'>Sigmas relative to camera " << HtmlEscape(file.cameras[0].id)
     << " (the adjustment's gauge).</p>";
   const Vec3d axis_cam0 = r.rig.cam_from_world[0].rotation * r.rig.axis;
   h << "<h2>Turntable and cuboid</h2><table>" << Row({"", "value", "&sigma;"}, true)
-    << Row({StrCat("axis in camera ", Escape(file.cameras[0].id), "'s frame"),
+    << Row({StrCat("axis in camera ", HtmlEscape(file.cameras[0].id), "'s frame"),
             Fmt(axis_cam0.x(), 6) + ", " + Fmt(axis_cam0.y(), 6) + ", " + Fmt(axis_cam0.z(), 6), ""})
     << Row({"axis (world)", Fmt(r.rig.axis.x(), 6) + ", " + Fmt(r.rig.axis.y(), 6) + ", " + Fmt(r.rig.axis.z(), 6),
             Fmt(r.sigma.axis_deg, 5) + " deg"})
@@ -436,7 +423,7 @@ Status WriteTurntableReport(const CalibFile& file, const TurntableResult& r, con
               std::to_string(r.per_angle[a].corners)});
   }
   for (size_t f = 0; f < file.faces.size(); ++f) {
-    h << Row({"face " + Escape(file.faces[f].name), Fmt(r.per_face[f].rms_px, 4), Fmt(r.per_face[f].max_px, 3),
+    h << Row({"face " + HtmlEscape(file.faces[f].name), Fmt(r.per_face[f].rms_px, 4), Fmt(r.per_face[f].max_px, 3),
               std::to_string(r.per_face[f].corners)});
   }
   h << "</table>";
@@ -453,16 +440,16 @@ Status WriteTurntableReport(const CalibFile& file, const TurntableResult& r, con
   h << "<h2>Not used</h2><table>" << Row({"photo", "face", "why"}, true);
   for (const FaceView& v : r.views) {
     if (v.used && v.corners_rejected == 0) continue;
-    h << Row({Escape(file.images[v.image].file), Escape(file.faces[v.face].name),
-              v.used ? StrCat(v.corners_rejected, " corner(s) rejected as outliers") : Escape(v.status)});
+    h << Row({HtmlEscape(file.images[v.image].file), HtmlEscape(file.faces[v.face].name),
+              v.used ? StrCat(v.corners_rejected, " corner(s) rejected as outliers") : HtmlEscape(v.status)});
   }
   for (const ImageResult& im : r.images) {
-    for (const std::string& why : im.refused) h << Row({Escape(im.file), "", "refused: " + Escape(why)});
-    if (im.status == "no board found") h << Row({Escape(im.file), "", "no board found"});
+    for (const std::string& why : im.refused) h << Row({HtmlEscape(im.file), "", "refused: " + HtmlEscape(why)});
+    if (im.status == "no board found") h << Row({HtmlEscape(im.file), "", "no board found"});
   }
   for (const BoardViewResult& v : r.board_views) {
     if (v.used) continue;
-    h << Row({Escape(v.file), "board", Escape(v.status)});
+    h << Row({HtmlEscape(v.file), "board", HtmlEscape(v.status)});
   }
   h << "</table><p class='note'>Every number: report.json.</p></body></html>\n";
   return WriteTextFileAtomic(dir / "index.html", h.str());
@@ -473,12 +460,12 @@ Status WriteIntrinsicsReport(const CalibFile& file, const IntrinsicsResult& r, c
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(dir / "report.json", IntrinsicsToJson(file, r, options)));
   std::ostringstream h;
   h << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>reflcap calibrate intrinsics</title>" << kStyle
-    << "</head><body><h1>Camera intrinsics</h1><p class='note'>" << Escape(file.json_path.string())
-    << " &mdash; estimated: " << Escape(options.model.ToString()) << "; detection " << Fmt(r.detect_s, 1)
+    << "</head><body><h1>Camera intrinsics</h1><p class='note'>" << HtmlEscape(file.json_path.string())
+    << " &mdash; estimated: " << HtmlEscape(options.model.ToString()) << "; detection " << Fmt(r.detect_s, 1)
     << " s, adjustment " << Fmt(r.solve_s, 1) << " s</p><table>"
     << Row({"camera", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "RMS (px)", "views", "coverage"}, true);
   for (const IntrinsicsCameraResult& c : r.cameras) {
-    std::vector<std::string> row = {Escape(c.intrinsics.id)};
+    std::vector<std::string> row = {HtmlEscape(c.intrinsics.id)};
     for (int k = 0; k < kIntrinsicCount; ++k) {
       const int digits = k < kK1 ? 2 : 5;
       row.push_back(Fmt(c.intrinsics.params[k], digits) + " &plusmn; " + Fmt(c.intrinsics.sigma[k], digits));
@@ -517,7 +504,7 @@ Status WriteIntrinsicsReport(const CalibFile& file, const IntrinsicsResult& r, c
       }
       if (best == nullptr || v.corners_used > best->corners_used) best = &v;
     }
-    h << "<h2>" << Escape(c.intrinsics.id) << "</h2><div class='plots'>"
+    h << "<h2>" << HtmlEscape(c.intrinsics.id) << "</h2><div class='plots'>"
       << BarChart("Reprojection RMS per view", "px", labels, {rms})
       << FramePlot(StrCat("Coverage: ", Fmt(100 * c.coverage_cells, 0), "% of 8x8 cells, radius ",
                           Fmt(100 * c.coverage_radius, 0), "% of the half diagonal"),
@@ -532,13 +519,13 @@ Status WriteIntrinsicsReport(const CalibFile& file, const IntrinsicsResult& r, c
       }
       const std::string png = StrCat("residuals_", c.intrinsics.id, ".png");
       REFLCAP_RETURN_IF_ERROR(WriteResidualPng(file.Resolve(best->file), dv, scale, dir / png));
-      h << "<figure><img src='" << png << "'><figcaption>" << Escape(best->file) << ": residuals &times;"
+      h << "<figure><img src='" << png << "'><figcaption>" << HtmlEscape(best->file) << ": residuals &times;"
         << Fmt(scale, 0) << "</figcaption></figure>";
     }
   }
   h << "<h2>Views not used</h2><table>" << Row({"photo", "why"}, true);
   for (const BoardViewResult& v : r.views) {
-    if (!v.used) h << Row({Escape(v.file), Escape(v.status)});
+    if (!v.used) h << Row({HtmlEscape(v.file), HtmlEscape(v.status)});
   }
   h << "</table><p class='note'>Every number: report.json.</p></body></html>\n";
   return WriteTextFileAtomic(dir / "index.html", h.str());

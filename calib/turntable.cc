@@ -600,10 +600,13 @@ double UpdateWeights(std::vector<FaceView>* views, std::vector<BoardViewResult>*
   return change;
 }
 
-// Rejects outlier corners and views; true when anything changed.
-bool RejectOutliers(const CalibFile& file, const TurntableOptions& options, std::vector<FaceView>* views) {
+// Rejects outlier corners and views (face views of the cuboid, or board photos: each set with
+// its own robust sigma and median); true when anything changed. `why` ends a rejected view's
+// status.
+template <typename View>
+bool RejectOutliers(const TurntableOptions& options, const std::string& why, std::vector<View>* views) {
   std::vector<double> components, view_rms;
-  for (const FaceView& v : *views) {
+  for (const View& v : *views) {
     if (!v.used) continue;
     view_rms.push_back(v.rms_px);
     for (size_t k = 0; k < v.valid.size(); ++k) {
@@ -612,12 +615,13 @@ bool RejectOutliers(const CalibFile& file, const TurntableOptions& options, std:
       components.push_back(v.residuals[k].y());
     }
   }
+  if (view_rms.empty()) return false;
   const double limit = std::max(options.outlier_sigmas * internal::RobustSigma(components), kMinOutlierPx);
   const double view_limit = std::max(options.view_rms_factor * internal::Median(view_rms),
                                      options.min_rejected_view_rms_px);
   // Outlier corners first; a view is judged on the corners it keeps, in a later round.
   bool changed = false;
-  for (FaceView& v : *views) {
+  for (View& v : *views) {
     if (!v.used) continue;
     for (size_t k = 0; k < v.valid.size(); ++k) {
       if (v.valid[k] && v.residuals[k].norm() > limit) {
@@ -628,11 +632,10 @@ bool RejectOutliers(const CalibFile& file, const TurntableOptions& options, std:
     }
   }
   if (changed) return true;
-  for (FaceView& v : *views) {
+  for (View& v : *views) {
     if (v.used && v.rms_px > view_limit) {
       v.used = false;
-      v.status = StrCat("rejected: reprojection RMS ", v.rms_px, " px > ", view_limit, " px (",
-                        options.view_rms_factor, "x the median face view)");
+      v.status = StrCat("rejected: reprojection RMS ", v.rms_px, " px > ", view_limit, " px", why);
       changed = true;
     }
   }
@@ -685,44 +688,6 @@ void EvaluateBoards(const CalibFile& file, const Params& p, std::vector<BoardVie
     v.rms_px = n > 0 ? std::sqrt(sum / n) : 0;
     v.max_px = mx;
   }
-}
-
-// As RejectOutliers, for the board photos (their own robust sigma and median).
-bool RejectBoardOutliers(const TurntableOptions& options, std::vector<BoardViewResult>* boards) {
-  std::vector<double> components, view_rms;
-  for (const BoardViewResult& v : *boards) {
-    if (!v.used) continue;
-    view_rms.push_back(v.rms_px);
-    for (size_t k = 0; k < v.valid.size(); ++k) {
-      if (!v.valid[k]) continue;
-      components.push_back(v.residuals[k].x());
-      components.push_back(v.residuals[k].y());
-    }
-  }
-  if (view_rms.empty()) return false;
-  const double limit = std::max(options.outlier_sigmas * internal::RobustSigma(components), kMinOutlierPx);
-  const double view_limit = std::max(options.view_rms_factor * internal::Median(view_rms),
-                                     options.min_rejected_view_rms_px);
-  bool changed = false;
-  for (BoardViewResult& v : *boards) {
-    if (!v.used) continue;
-    for (size_t k = 0; k < v.valid.size(); ++k) {
-      if (v.valid[k] && v.residuals[k].norm() > limit) {
-        v.valid[k] = 0;
-        ++v.corners_rejected;
-        changed = true;
-      }
-    }
-  }
-  if (changed) return true;
-  for (BoardViewResult& v : *boards) {
-    if (v.used && v.rms_px > view_limit) {
-      v.used = false;
-      v.status = StrCat("rejected: reprojection RMS ", v.rms_px, " px > ", view_limit, " px");
-      changed = true;
-    }
-  }
-  return changed;
 }
 
 // Rotation sigma (degrees, about the rotated frame's axes) of an angle-axis block from its
@@ -1175,8 +1140,9 @@ StatusOr<TurntableResult> Adjust(const CalibFile& file, const std::vector<Intrin
     result.rejection_rounds = round + 1;
     EvaluateViews(p.ToModel(), file, &result.views, false);
     EvaluateBoards(file, p, &result.board_views);
-    const bool faces_changed = RejectOutliers(file, options, &result.views);
-    const bool boards_changed = RejectBoardOutliers(options, &result.board_views);
+    const bool faces_changed = RejectOutliers(
+        options, StrCat(" (", options.view_rms_factor, "x the median face view)"), &result.views);
+    const bool boards_changed = RejectOutliers(options, "", &result.board_views);
     const bool weights_changed =
         options.weight_views && UpdateWeights(&result.views, &result.board_views) > kWeightTolerance;
     if (!faces_changed && !boards_changed && !weights_changed) break;

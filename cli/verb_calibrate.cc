@@ -38,6 +38,17 @@ int Usage(const std::string& what, const std::string& message) {
 }
 
 // The report folder beside an output file: RIG.json -> RIG_report.
+// The solver flags both calibrations share (their options structs name the fields alike).
+template <typename Options>
+void AddSolverFlags(ArgParser* args, Options* options) {
+  args->AddDouble("loss-scale", &options->loss_scale_px,
+                  StrCat("Huber loss scale, pixels (default ", options->loss_scale_px, ")"));
+  args->AddDouble("outlier-sigmas", &options->outlier_sigmas,
+                  StrCat("reject corners beyond this many robust sigmas (default ",
+                         options->outlier_sigmas, ")"));
+  args->AddInt("threads", &options->threads, "worker threads (default: all cores)");
+}
+
 fs::path DefaultReportDir(const fs::path& out) {
   return out.parent_path() / (out.stem().string() + "_report");
 }
@@ -78,11 +89,7 @@ int RunIntrinsics(int argc, char** argv) {
   args.AddString("intrinsics-params", &model_list, "LIST",
                  StrCat("what to estimate (default ", options.model.ToString(),
                         "; add k3; \"f\" instead of fx,fy ties them: square pixels)"));
-  args.AddDouble("loss-scale", &options.loss_scale_px,
-                 StrCat("Huber loss scale, pixels (default ", options.loss_scale_px, ")"));
-  args.AddDouble("outlier-sigmas", &options.outlier_sigmas,
-                 StrCat("reject corners beyond this many robust sigmas (default ", options.outlier_sigmas, ")"));
-  args.AddInt("threads", &options.threads, "worker threads (default: all cores)");
+  AddSolverFlags(&args, &options);
   args.AddFlag("overwrite", &overwrite, "replace INTRINSICS.json and the report if they exist");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 3, &help); !s.ok()) return Usage("intrinsics", s.message());
@@ -201,11 +208,7 @@ int RunTurntable(int argc, char** argv) {
   args.AddString("capture", &capture_path, "CAPTURE.json",
                  "write RIG.json as this capture/1 with its cameras and turntable calibrated");
   args.AddString("report", &report, "DIR", "report folder (default: beside the output, <name>_report)");
-  args.AddDouble("loss-scale", &options.loss_scale_px,
-                 StrCat("Huber loss scale, pixels (default ", options.loss_scale_px, ")"));
-  args.AddDouble("outlier-sigmas", &options.outlier_sigmas,
-                 StrCat("reject corners beyond this many robust sigmas (default ", options.outlier_sigmas, ")"));
-  args.AddInt("threads", &options.threads, "worker threads (default: all cores)");
+  AddSolverFlags(&args, &options);
   args.AddFlag("overwrite", &overwrite, "replace RIG.json and the report if they exist");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 3, &help); !s.ok()) return Usage("turntable", s.message());

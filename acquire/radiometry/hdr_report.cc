@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "engine/core/atomic_file.h"
+#include "engine/core/html.h"
 #include "engine/image/png_io.h"
 
 namespace reflcap::radiometry {
@@ -20,20 +21,6 @@ namespace {
 
 // The chart drawing is upscaled so that patch numbers stay legible on small photographs.
 constexpr int kChartDrawScale = 3;
-
-std::string Html(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '&': out += "&amp;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
-}
 
 std::string Num(double v, int digits = 4) {
   char buf[64];
@@ -128,7 +115,7 @@ Image ChartDrawing(const MergedBracket& chart, const ChartDetection& d) {
 std::string Table(const std::vector<std::string>& header, const std::vector<std::vector<std::string>>& rows) {
   std::ostringstream o;
   o << "<table><tr>";
-  for (const auto& h : header) o << "<th>" << Html(h) << "</th>";
+  for (const auto& h : header) o << "<th>" << HtmlEscape(h) << "</th>";
   o << "</tr>\n";
   for (const auto& r : rows) {
     o << "<tr>";
@@ -211,7 +198,7 @@ std::string ResponseSvg(const InverseResponse& response, const std::vector<doubl
     }
     o << "'/>\n";
   }
-  o << "<text x='" << L + 10 << "' y='" << T + 16 << "'>" << Html(response.model)
+  o << "<text x='" << L + 10 << "' y='" << T + 16 << "'>" << HtmlEscape(response.model)
     << (truth ? " (R, G, B; truth dashed; lower panel: error, shaded ±0.01 over codes 20–235)" : " (R, G, B)")
     << "</text>\n";
   o << "</svg>\n";
@@ -225,16 +212,16 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
        "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 6px;"
        "font-size:13px;text-align:right}th{background:#f4f4f4}img{image-rendering:pixelated}"
        ".good{color:#080}.bad{color:#b00}</style></head><body>\n";
-  o << "<h1>reflcap hdr</h1><p>Brackets: <code>" << Html(report.value("brackets", "")) << "</code></p>\n";
+  o << "<h1>reflcap hdr</h1><p>Brackets: <code>" << HtmlEscape(report.value("brackets", "")) << "</code></p>\n";
   const Json& photos = report["photos"];
   o << "<p>" << photos.value("object", 0) << " object photos (train " << photos.value("train", 0)
     << ", holdout " << photos.value("holdout", 0) << "), chart photo: "
-    << Html(photos.value("chart", std::string("none"))) << ".</p>\n";
+    << HtmlEscape(photos.value("chart", std::string("none"))) << ".</p>\n";
 
   const Json& r = report["response"];
-  o << "<h2>Camera response</h2><p>Chosen model: <b>" << Html(r.value("model", "")) << "</b>";
+  o << "<h2>Camera response</h2><p>Chosen model: <b>" << HtmlEscape(r.value("model", "")) << "</b>";
   if (r.contains("model_without_chart")) {
-    o << " (without the chart's anchors: " << Html(r["model_without_chart"].get<std::string>()) << ")";
+    o << " (without the chart's anchors: " << HtmlEscape(r["model_without_chart"].get<std::string>()) << ")";
   }
   o << ". Reduced χ² per channel: " << NumJ(r["reduced_chi2"][0]) << ", " << NumJ(r["reduced_chi2"][1]) << ", "
     << NumJ(r["reduced_chi2"][2]) << " (≈ 1 when the noise model describes the data). Noise (raw units, clip = 1): ";
@@ -253,7 +240,7 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
   }
   std::vector<std::vector<std::string>> rows;
   for (const Json& m : r["candidates"]) {
-    rows.push_back({Html(m["model"].get<std::string>()) + (m["chosen"].get<bool>() ? " ✔" : ""),
+    rows.push_back({HtmlEscape(m["model"].get<std::string>()) + (m["chosen"].get<bool>() ? " ✔" : ""),
                     std::to_string(m["parameters"].get<int>()), NumJ(m["chi2"], 7), NumJ(m["bic"], 7),
                     m["monotone"].get<bool>() ? "yes" : "no",
                     m.contains("truth_max_abs_log_error") ? NumJ(m["truth_max_abs_log_error"], 3) : "–"});
@@ -272,12 +259,12 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
     o << "<p>Against <code>source_hdr</code>: median relative error <b>" << NumJ(m["truth"]["median_rel_error"], 3)
       << "</b>, p95 <b>" << NumJ(m["truth"]["p95_rel_error"], 3) << "</b>, p99 " << NumJ(m["truth"]["p99_rel_error"], 3)
       << " over " << m["truth"]["pixel_channels"].get<size_t>() << " pixel-channels ("
-      << Html(m["truth"]["definition"].get<std::string>()) << ").</p>\n";
+      << HtmlEscape(m["truth"]["definition"].get<std::string>()) << ").</p>\n";
   }
   if (images.weights) {
     REFLCAP_RETURN_IF_ERROR(WritePng(dir / "weights.png", WeightMap(*images.weights)));
     const int E = images.weights->weight_share.channels;
-    o << "<p>Weight map of photo <code>" << Html(m.value("weight_map_photo", "")) << "</code>: each pixel coloured "
+    o << "<p>Weight map of photo <code>" << HtmlEscape(m.value("weight_map_photo", "")) << "</code>: each pixel coloured "
       << "by the share of its merge weight (green channel) each exposure carries:";
     for (int e = 0; e < E; ++e) {
       const Vec3d c = Palette(E > 1 ? double(e) / (E - 1) : 0.5);
@@ -294,7 +281,7 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
   if (ch.value("method", "none") == "none") {
     o << "<p>No chart used (--no-chart): the capture is in camera RGB.</p>";
   } else {
-    o << "<p>Found by <b>" << Html(ch["method"].get<std::string>()) << "</b> (" << Html(ch.value("seed", ""))
+    o << "<p>Found by <b>" << HtmlEscape(ch["method"].get<std::string>()) << "</b> (" << HtmlEscape(ch.value("seed", ""))
       << "); " << ch["edges_refined"].get<int>() << " of 96 patch edges refined, PnP reprojection RMS "
       << NumJ(ch["reprojection_rms_px"], 3) << " px, colour residual " << NumJ(ch["colour_residual"], 3) << ".";
     if (ch.contains("pose_vs_declared")) {
@@ -318,7 +305,7 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
     o << "</p>\n";
     rows.clear();
     for (const Json& p : ch["patches"]) {
-      rows.push_back({std::to_string(p["index"].get<int>()), Html(p["name"].get<std::string>()),
+      rows.push_back({std::to_string(p["index"].get<int>()), HtmlEscape(p["name"].get<std::string>()),
                       std::to_string(p["pixels"].get<int>()), NumJ(p["delta_e00_before"], 3),
                       NumJ(p["delta_e00_gains"], 3), NumJ(p["delta_e00_matrix"], 3)});
     }
@@ -327,7 +314,7 @@ Status WriteHdrReport(const fs::path& dir, const Json& report, const ReportImage
     o << "<p>ΔE00 per patch (albedo in CIELAB, D65):</p>"
       << Table({"#", "patch", "pixels", "before", "after gains", "after matrix"}, rows);
   }
-  o << "<h2>Timings</h2><pre>" << Html(report["timings_s"].dump(2)) << "</pre>\n</body></html>\n";
+  o << "<h2>Timings</h2><pre>" << HtmlEscape(report["timings_s"].dump(2)) << "</pre>\n</body></html>\n";
   return WriteTextFileAtomic(dir / "report.html", o.str());
 }
 

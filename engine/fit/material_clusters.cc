@@ -186,7 +186,6 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
 
   const size_t k_count = nodes.size();
   out.count = int(k_count);
-  out.candidates.resize(k_count);
   out.candidate_params.resize(k_count);
   out.pool.resize(k_count);
   out.stash.resize(k_count);
@@ -214,7 +213,6 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
     std::stable_sort(own.begin(), own.end(),
                      [&](uint32_t x, uint32_t y) { return fits.samples(x) > fits.samples(y); });
     own.resize(std::min(own.size(), size_t(kClusterLobeCandidates)));
-    out.candidates[k] = own;
     for (uint32_t d : own) out.candidate_params[k].push_back(fits.Get(d).params);
     if (own.empty()) continue;  // nothing to lend: no pool needed
     // Pool: an even stride through the evidenced members (ascending texels).
@@ -379,6 +377,8 @@ bool RefineClusterLobe(const MaterialClusters& clusters, size_t k, LobeModel mod
     // The albedos are independent given the lobe: the Schur complement eliminates them, leaving
     // a 4x4 system per step.
     solver.linear_solver_type = ceres::DENSE_SCHUR;
+    // It starts from the best candidate, already near the pooled optimum: a few dozen steps settle
+    // four parameters (and the fitter's own LM caps a stage at 100).
     solver.max_num_iterations = 50;
     solver.num_threads = 1;  // clusters run in parallel instead
     solver.logging_type = ceres::SILENT;

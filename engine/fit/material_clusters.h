@@ -102,8 +102,7 @@ struct MaterialClusters {
   std::vector<int32_t> cluster_of;  // per texel: its cluster, -1 for none
 
   // Per cluster.
-  std::vector<std::vector<uint32_t>> candidates;  // donor texels of the candidate lobes
-  std::vector<std::vector<brdf::BrdfParams>> candidate_params;
+  std::vector<std::vector<brdf::BrdfParams>> candidate_params;  // lobes of its best-sampled texels
   std::vector<std::vector<uint32_t>> pool;        // pool texels, ascending
   std::vector<std::vector<BrdfSample>> stash;     // their kept samples, pool order
   std::vector<std::vector<UsableSample>> usable;  // the same, prepared

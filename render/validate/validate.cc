@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/core/atomic_file.h"
+#include "engine/core/html.h"
 #include "engine/core/log.h"
 #include "engine/core/parallel.h"
 #include "engine/core/progress.h"
@@ -56,20 +57,6 @@ std::string Fixed(const std::optional<double>& v, int digits) {
   char text[64];
   std::snprintf(text, sizeof text, "%.*f", digits, *v);
   return text;
-}
-
-std::string HtmlEscape(const std::string& text) {
-  std::string out;
-  for (char c : text) {
-    switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
-    }
-  }
-  return out;
 }
 
 // A key usable as one file name: "raw/a" -> "raw_a".
