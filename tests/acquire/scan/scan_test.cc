@@ -49,7 +49,8 @@ constexpr double kMaxNormalErrorDeg = 6.0;
 constexpr double kMaxNormalErrorSteepDeg = 20.0;
 // The merged sphere: the synthetic camera samples it every 1.7 mm (suzanne's: 0.45 mm), and the
 // vertex projection's plane fit over 2.5 spacings on a 40 mm radius is biased by ~0.05 mm;
-// measured median 0.066 mm. Bounds: 0.1 mm median, 0.3 mm p95 (the p95 target).
+// measured median 0.091 mm, p95 0.264 mm (the same on every run: Poisson runs on one thread).
+// Bounds: 0.1 mm median, 0.3 mm p95 (the p95 target).
 constexpr double kMaxMeshMedianM = 0.1e-3;
 constexpr double kMaxMeshP95M = 0.3e-3;
 
@@ -383,8 +384,8 @@ TEST(ScanPipeline, MergesTheSphereIntoOneTrimmedUnwrappedMesh) {
     d.push_back(std::abs((p.cast<double>() - Scan().sphere_center_object).norm() - Scan().sphere_radius_m));
   }
   const DistanceStats stats = Summarise(d);
-  EXPECT_LT(stats.median_m, kMaxMeshMedianM);
-  EXPECT_LT(stats.p95_m, kMaxMeshP95M);
+  EXPECT_LT(stats.median_m, kMaxMeshMedianM) << "p95 " << stats.p95_m;
+  EXPECT_LT(stats.p95_m, kMaxMeshP95M) << "median " << stats.median_m;
   // Trimmed: the projector (25 deg above the horizon) lights the sphere down to 40 cos(25 deg) =
   // 36.3 mm below its centre, and trimming bridges at most 4 spacings (~7 mm of arc) beyond, so
   // nothing of the bottom 1 mm cap remains (Poisson alone closes the sphere down to the pole).
