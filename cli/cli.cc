@@ -65,6 +65,13 @@ void ArgParser::AddPositional(const std::string& name, std::string* value, const
   positionals_.push_back({name, help, value});
 }
 
+void ArgParser::AddPositionalList(const std::string& name, std::vector<std::string>* values,
+                                  const std::string& help) {
+  list_name_ = name;
+  list_help_ = help;
+  list_ = values;
+}
+
 Status ArgParser::Parse(int argc, char** argv, int first, bool* help) {
   *help = false;
   for (int i = first; i < argc; ++i) {
@@ -101,7 +108,11 @@ Status ArgParser::Parse(int argc, char** argv, int first, bool* help) {
       continue;
     }
     if (next_positional >= positionals_.size()) {
-      return InvalidArgumentError("unexpected argument \"", arg, "\" (see reflcap ", verb_, " --help)");
+      if (list_ == nullptr) {
+        return InvalidArgumentError("unexpected argument \"", arg, "\" (see reflcap ", verb_, " --help)");
+      }
+      list_->push_back(arg);
+      continue;
     }
     *positionals_[next_positional++].value = arg;
   }
@@ -109,18 +120,26 @@ Status ArgParser::Parse(int argc, char** argv, int first, bool* help) {
     return InvalidArgumentError("missing ", positionals_[next_positional].name, " (see reflcap ",
                                 verb_, " --help)");
   }
+  if (list_ != nullptr && list_->empty()) {
+    return InvalidArgumentError("missing ", list_name_, " (see reflcap ", verb_, " --help)");
+  }
   return OkStatus();
 }
 
 std::string ArgParser::Help() const {
   std::ostringstream out;
   out << "usage: reflcap " << verb_ << " " << synopsis_ << "\n\n" << description_ << "\n";
-  if (!positionals_.empty()) {
+  if (!positionals_.empty() || list_ != nullptr) {
     out << "\narguments:\n";
     for (const auto& p : positionals_) {
       char line[64];
       std::snprintf(line, sizeof line, "  %-22s ", p.name.c_str());
       out << line << p.help << "\n";
+    }
+    if (list_ != nullptr) {
+      char line[64];
+      std::snprintf(line, sizeof line, "  %-22s ", (list_name_ + "...").c_str());
+      out << line << list_help_ << "\n";
     }
   }
   out << "\noptions:\n";

@@ -27,6 +27,9 @@ class ArgParser {
   void AddDouble(const std::string& name, double* value, const std::string& help);
   // Positional arguments, in order.
   void AddPositional(const std::string& name, std::string* value, const std::string& help);
+  // One or more trailing positional arguments (after those of AddPositional), e.g. PARTS...
+  void AddPositionalList(const std::string& name, std::vector<std::string>* values,
+                         const std::string& help);
 
   // Parses argv[first..argc). Returns InvalidArgument for unknown options, missing values or
   // positionals, and malformed numbers. Sets *help when --help/-h was given (nothing else checked).
@@ -46,6 +49,8 @@ class ArgParser {
   std::string verb_, synopsis_, description_;
   std::vector<Option> options_;
   std::vector<Positional> positionals_;
+  std::string list_name_, list_help_;
+  std::vector<std::string>* list_ = nullptr;
 };
 
 // Prints `status` as "reflcap <verb>: <message>" on stderr and returns its exit code.
@@ -65,6 +70,7 @@ int RunBench(int argc, char** argv);     // verb_bench.cc
 int RunCalibrate(int argc, char** argv); // verb_calibrate.cc
 int RunHdr(int argc, char** argv);       // verb_hdr.cc
 int RunScan(int argc, char** argv);      // verb_scan.cc
+int RunMerge(int argc, char** argv);     // verb_merge.cc
 
 
 }  // namespace reflcap::cli

@@ -20,6 +20,7 @@ constexpr char kUsage[] =
     "  demo [--out DIR]    run the pipeline end to end on a small synthetic capture\n"
     "  resample CAPTURE --out SAMPLES   photographs -> per-texel BRDF samples\n"
     "  fit SAMPLES --out FIT            per-texel Lambert + Lafortune fit\n"
+    "  merge PARTS... --out DIR         join the parts of --shard I/N runs\n"
     "  render CAPTURE FIT --out DIR     re-render photographs from a fit\n"
     "  run CAPTURE --out DIR            resample -> fit -> render holdout -> validate\n"
     "  validate CAPTURE RENDERS --out REPORT   compare re-renders with photographs\n"
@@ -66,6 +67,7 @@ int main(int argc, char** argv) {
   if (verb == "calibrate") return cli::RunCalibrate(argc, argv);
   if (verb == "hdr") return cli::RunHdr(argc, argv);
   if (verb == "scan") return cli::RunScan(argc, argv);
+  if (verb == "merge") return cli::RunMerge(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }

@@ -100,7 +100,9 @@ int RunFit(int argc, char** argv) {
                  "or virtual) and on the CPU otherwise, also when the only Vulkan device is\n"
                  "lavapipe (the CPU's own cores run the batched kernel faster); it says which.\n"
                  "Writes FIT/params.exr, sigma.exr, status.exr and fit_report.json (with the\n"
-                 "backend and the device's name).");
+                 "backend and the device's name). Each fitted chunk is checkpointed in\n"
+                 "FIT.checkpoint until FIT is complete: --resume continues a killed run.\n"
+                 "--shard I/N fits one shard into a part; reflcap merge joins the N parts.");
   args.AddPositional("SAMPLES", &samples, "sample store folder (reflcap resample --out)");
   args.AddString("out", &out, "FIT", "output folder (must not exist or be empty)");
   args.AddString("backend", &backend_name, "NAME",
@@ -114,6 +116,13 @@ int RunFit(int argc, char** argv) {
                  "robust loss scale in noise standard deviations (default 3)");
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite, "replace FIT if it exists (only once the new one is complete)");
+  std::string shard_text;
+  fit::FitRunControl control;
+  args.AddString("shard", &shard_text, "I/N",
+                 "fit only shard I of N (chunk-aligned texel ranges) and write a part to FIT for "
+                 "reflcap merge (default: the whole store)");
+  args.AddFlag("resume", &control.resume,
+               "continue an interrupted fit from FIT.checkpoint (its fitted chunks are kept)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
@@ -143,11 +152,25 @@ int RunFit(int argc, char** argv) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
     return kExitUsage;
   }
+  if (!shard_text.empty()) {
+    auto shard = fit::ParseShard(shard_text);
+    if (!shard.ok()) {
+      std::fprintf(stderr, "reflcap fit: %s\n", shard.status().message().c_str());
+      return kExitUsage;
+    }
+    control.shard = *shard;
+  }
   fit::VulkanFitterOptions vulkan = fit_flags.vulkan;
   vulkan.device = device;
   auto summary = fit::RunFit(samples, out, backend->backend, options, overwrite, vulkan,
-                              backend->choice);
+                              backend->choice, control);
   if (!summary.ok()) return ReportError("fit", summary.status());
+  if (control.shard.count > 1) {
+    std::printf("fit part %d/%d  %s  (%s): %zu texels, %.0f fits/s, %s\n", control.shard.index,
+                control.shard.count, out.c_str(), summary->device.c_str(), summary->texels,
+                summary->fits_per_second, FormatDuration(summary->total_seconds).c_str());
+    return 0;
+  }
   std::printf("fit  %s  (%s%s)\n", out.c_str(), backend->backend == fit::Backend::kVulkan ? "vulkan: " : "",
               summary->device.c_str());
   std::printf("  texels %zu (with samples %zu), %.0f fits/s, %s\n", summary->texels,

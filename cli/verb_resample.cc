@@ -62,6 +62,10 @@ int RunResample(int argc, char** argv) {
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: do not reject samples in cast shadow on the height field "
                "integrated from the normal map (default: rejected as shadowed)");
+  int chunk_texels = int(options.chunk_texels);
+  args.AddInt("chunk-texels", &chunk_texels,
+              StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,
+                     "); the unit `fit --shard` divides and `fit --resume` checkpoints"));
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite,
                "replace SAMPLES if it exists (only once the new one is complete)");
@@ -91,6 +95,11 @@ int RunResample(int argc, char** argv) {
   options.split = *parsed_split;
   options.backend = *parsed_backend;
   options.height_shadows = !no_height_shadows;
+  if (chunk_texels < 1) {
+    std::fprintf(stderr, "reflcap resample: --chunk-texels must be >= 1\n");
+    return kExitUsage;
+  }
+  options.chunk_texels = uint32_t(chunk_texels);
   if (Status s = options.Validate(); !s.ok()) {
     std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
     return kExitUsage;

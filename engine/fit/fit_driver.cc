@@ -172,17 +172,27 @@ uint64_t SampleCacheBudget() {
 
 }  // namespace
 
-StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
-                               const FitOptions& options, bool overwrite,
-                               const VulkanFitterOptions& vulkan, const std::string& backend_choice) {
-  const auto start = std::chrono::steady_clock::now();
-  REFLCAP_RETURN_IF_ERROR(options.Validate());
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter,
-                           CreateFitter(backend, options.threads, vulkan));
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
-  const SampleStoreInfo& info = store->info();
-  REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
+namespace {
 
+// What the per-chunk phase leaves for the post-fit phase (FinishFit).
+struct FitPass {
+  std::unique_ptr<FitStore> fits;
+  std::unique_ptr<SigmaSpill> sigma;
+  // Chunks kept after the fit pass for lobe transfer and the clusters, which test recipients on
+  // their own samples: re-reading and checking the store for each took 8.3 of the transfer's
+  // 11.9 s on the million preset (2 cores). Kept while their decoded size stays within
+  // SampleCacheBudget(); the others are read again.
+  std::vector<std::optional<TexelSampleChunk>> cached;
+  uint64_t cached_bytes = 0;
+  double read_seconds = 0, fit_seconds = 0, checkpoint_seconds = 0;
+  size_t iso_chosen = 0;  // --lobe-model auto: texels that kept the isotropic fit
+  VulkanFitStats vulkan_stats;  // summed over the chunks (kVulkan)
+  bool used_vulkan = false;
+  uint32_t fitted_chunks = 0, resumed_chunks = 0;
+};
+
+// The store's atlas, checked against store.json.
+StatusOr<TexelAtlas> StoreAtlas(const fs::path& samples, const SampleStoreInfo& info) {
   TexelAtlas atlas;
   atlas.width = info.atlas_width;
   atlas.height = info.atlas_height;
@@ -197,68 +207,94 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
                            atlas.width, "x", atlas.height, " atlas");
     }
   }
-
   if (info.texels > FitStore::kMaxTexels) {
     return InvalidArgumentError(samples.string(), ": ", info.texels, " texels; fit takes at most ",
                                 FitStore::kMaxTexels);
   }
-  // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
-  // unknown sigmas.
-  FitStore fits(info.texels, options.lobes);
-  REFLCAP_ASSIGN_OR_RETURN(
-      std::unique_ptr<SigmaSpill> sigma,
-      SigmaSpill::Create(staging.path() / kSigmaScratchFile, info.texels, options.lobes));
-  FitRunSummary summary;
-  summary.device = fitter->device();
-  Progress progress("fit", info.texels);
-  double read_seconds = 0, fit_seconds = 0;
-  std::vector<TexelFit> results, iso_results;
+  return atlas;
+}
+
+uint32_t ChunkFirstTexel(const SampleStoreInfo& info, uint32_t c) { return c * info.chunk_texels; }
+uint32_t ChunkTexelCount(const SampleStoreInfo& info, uint32_t c) {
+  return uint32_t(std::min<uint64_t>(info.chunk_texels, uint64_t(info.texels) - ChunkFirstTexel(info, c)));
+}
+
+// Stores one chunk's results in the pass.
+Status Keep(uint32_t first_texel, const std::vector<TexelFit>& results, FitPass* pass) {
+  for (size_t i = 0; i < results.size(); ++i) pass->fits->Set(first_texel + i, results[i]);
+  return pass->sigma->Write(first_texel, results);
+}
+
+// The per-chunk phase over chunks [range.begin, range.end): each chunk fitted (the next read on
+// a thread meanwhile) and its results kept in the pass and, when `checkpoint` is not empty,
+// written there as a chunk result file. With `resume`, chunks whose result file is already there
+// are read instead of fitted.
+Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitter,
+                 const FitOptions& options, const fs::path& checkpoint, bool resume,
+                 FitPass* pass) {
+  const SampleStoreInfo& info = store.info();
+  uint64_t range_texels = 0;
+  for (uint32_t c = range.begin; c < range.end; ++c) range_texels += ChunkTexelCount(info, c);
+  Progress progress("fit", range_texels);
+  std::vector<uint32_t> todo;
+  for (uint32_t c = range.begin; c < range.end; ++c) {
+    const fs::path file = checkpoint.empty() ? fs::path() : checkpoint / FitChunkFileName(c);
+    std::error_code ec;
+    if (resume && !file.empty() && fs::exists(file, ec)) {
+      REFLCAP_ASSIGN_OR_RETURN(std::vector<TexelFit> results,
+                               ReadFitChunk(file, ChunkFirstTexel(info, c), ChunkTexelCount(info, c),
+                                            options.lobes));
+      REFLCAP_RETURN_IF_ERROR(Keep(ChunkFirstTexel(info, c), results, pass));
+      ++pass->resumed_chunks;
+      progress.Advance(ChunkTexelCount(info, c));
+    } else {
+      todo.push_back(c);
+    }
+  }
+  if (pass->resumed_chunks > 0) {
+    REFLCAP_LOG(kInfo) << "fit: resumed " << pass->resumed_chunks << " of " << range.end - range.begin
+                       << " chunks from " << checkpoint.string() << "; fitting " << todo.size();
+  }
   // --lobe-model auto (FitOptions::select_lobe_model): a second, isotropic fit of every chunk.
   const bool select_model =
       options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
   FitOptions iso_options = options;
   iso_options.lobe_model = LobeModel::kIso;
-  size_t iso_chosen = 0;
-  VulkanFitStats vulkan_stats;  // summed over the chunks (kVulkan)
-  bool used_vulkan = false;
-  auto read = [&store](uint32_t index) { return store->ReadChunk(index); };
-  // Chunks kept after the fit pass for lobe transfer, which tests recipients on their own samples
-  // in up to `rounds` passes: re-reading and checking the store for each took 8.3 of the
-  // transfer's 11.9 s on the million preset (2 cores). Kept while their decoded size stays within
-  // SampleCacheBudget(); the others are read again.
   const bool keep_chunks =
       (options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0;
   const uint64_t cache_budget = keep_chunks ? SampleCacheBudget() : 0;
-  uint64_t cached_bytes = 0;
-  std::vector<std::optional<TexelSampleChunk>> cached(info.chunks);
+  std::vector<TexelFit> results, iso_results;
+  auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
   std::future<StatusOr<TexelSampleChunk>> next;
-  if (info.chunks > 0) next = std::async(std::launch::async, read, 0u);
-  for (uint32_t c = 0; c < info.chunks; ++c) {
+  if (!todo.empty()) next = std::async(std::launch::async, read, todo[0]);
+  for (size_t k = 0; k < todo.size(); ++k) {
+    const uint32_t c = todo[k];
     const auto read_start = std::chrono::steady_clock::now();
     StatusOr<TexelSampleChunk> chunk = next.get();
-    read_seconds += Seconds(read_start);
+    pass->read_seconds += Seconds(read_start);
     if (!chunk.ok()) return chunk.status();
-    if (c + 1 < info.chunks) next = std::async(std::launch::async, read, c + 1);
+    if (k + 1 < todo.size()) next = std::async(std::launch::async, read, todo[k + 1]);
     if (uint64_t(chunk->first_texel) + chunk->texel_count > info.texels) {
-      return DataLossError(store->ChunkPath(c).string(), ": texels ", chunk->first_texel, "..",
+      return DataLossError(store.ChunkPath(c).string(), ": texels ", chunk->first_texel, "..",
                            chunk->first_texel + chunk->texel_count, " beyond the store's ",
                            info.texels);
     }
     const auto fit_start = std::chrono::steady_clock::now();
     REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, options, &results));
-    if (const auto* vk = dynamic_cast<const VulkanFitter*>(fitter.get())) {
+    if (const auto* vk = dynamic_cast<const VulkanFitter*>(fitter)) {
       const VulkanFitStats& st = vk->last_stats();
-      vulkan_stats.kernel = st.kernel;
-      vulkan_stats.cluster_size = st.cluster_size;
-      vulkan_stats.native_math = st.native_math;
-      vulkan_stats.batches += st.batches;
-      vulkan_stats.dispatches += st.dispatches;
-      vulkan_stats.gpu_problems += st.gpu_problems;
-      vulkan_stats.cpu_problems += st.cpu_problems;
-      vulkan_stats.device_seconds += st.device_seconds;
-      vulkan_stats.prepare_seconds += st.prepare_seconds;
-      vulkan_stats.finish_seconds += st.finish_seconds;
-      used_vulkan = true;
+      VulkanFitStats& sum = pass->vulkan_stats;
+      sum.kernel = st.kernel;
+      sum.cluster_size = st.cluster_size;
+      sum.native_math = st.native_math;
+      sum.batches += st.batches;
+      sum.dispatches += st.dispatches;
+      sum.gpu_problems += st.gpu_problems;
+      sum.cpu_problems += st.cpu_problems;
+      sum.device_seconds += st.device_seconds;
+      sum.prepare_seconds += st.prepare_seconds;
+      sum.finish_seconds += st.finish_seconds;
+      pass->used_vulkan = true;
     }
     if (select_model) {
       REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, iso_options, &iso_results));
@@ -266,29 +302,90 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
         if (Bic(iso_results[i], LobeModel::kIso, options.lobes) <
             Bic(results[i], LobeModel::kAniso, options.lobes)) {
           results[i] = iso_results[i];
-          ++iso_chosen;
+          ++pass->iso_chosen;
         }
       }
     }
-    fit_seconds += Seconds(fit_start);
-    for (size_t i = 0; i < results.size(); ++i) fits.Set(chunk->first_texel + i, results[i]);
-    REFLCAP_RETURN_IF_ERROR(sigma->Write(chunk->first_texel, results));
+    pass->fit_seconds += Seconds(fit_start);
+    REFLCAP_RETURN_IF_ERROR(Keep(chunk->first_texel, results, pass));
+    if (!checkpoint.empty()) {
+      const auto write_start = std::chrono::steady_clock::now();
+      REFLCAP_RETURN_IF_ERROR(
+          WriteFitChunk(checkpoint / FitChunkFileName(c), chunk->first_texel, options.lobes, results));
+      pass->checkpoint_seconds += Seconds(write_start);
+    }
+    ++pass->fitted_chunks;
     progress.Advance(chunk->texel_count);
     const uint64_t bytes = chunk->samples.size() * sizeof(BrdfSample) +
                            chunk->offsets.size() * sizeof(uint64_t);
-    if (cached_bytes + bytes <= cache_budget) {
-      cached_bytes += bytes;
-      cached[c] = std::move(chunk).value();
+    if (pass->cached_bytes + bytes <= cache_budget) {
+      pass->cached_bytes += bytes;
+      pass->cached[c] = std::move(chunk).value();
     }
   }
   progress.Finish();
-  // The fitter's per-worker workspaces and the chunk results are sized by the largest chunk;
-  // nothing needs them past the fit.
-  fitter.reset();
-  std::vector<TexelFit>().swap(results);
-  std::vector<TexelFit>().swap(iso_results);
-  ReleaseFreeHeap();
+  return OkStatus();
+}
 
+// Starts or continues the checkpoint folder `dir` of a run described by `manifest`: a folder
+// left by an interrupted run is continued only with `resume` and only when it is of the same
+// store, options, backend and shard.
+Status OpenCheckpoint(const fs::path& dir, const FitPartManifest& manifest, bool resume) {
+  std::error_code ec;
+  const fs::path file = dir / kFitCheckpointFile;
+  if (fs::exists(dir, ec)) {
+    if (!resume) {
+      return FailedPreconditionError(
+          dir.string(), ": holds the chunk results of an interrupted fit to this output (pass "
+                        "--resume to continue it, or delete the folder to start over)");
+    }
+    REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadTextFile(file));
+    const Json json = Json::parse(text, nullptr, false);
+    if (json.is_discarded()) return DataLossError(file.string(), ": not valid JSON");
+    REFLCAP_ASSIGN_OR_RETURN(FitPartManifest before, FitPartManifest::FromJson(json, file.string()));
+    std::string mismatch = manifest.Mismatch(before);
+    if (mismatch.empty() && (before.shard.index != manifest.shard.index ||
+                             before.range.begin != manifest.range.begin ||
+                             before.range.end != manifest.range.end)) {
+      mismatch = "shard";
+    }
+    if (!mismatch.empty()) {
+      return FailedPreconditionError(file.string(), ": ", mismatch,
+                                     " differs from this run: the checkpoint belongs to another "
+                                     "fit (delete ", dir.string(), " to start over)");
+    }
+    return OkStatus();
+  }
+  if (resume) {
+    REFLCAP_LOG(kWarning) << "fit: --resume: no checkpoint at " << dir.string()
+                          << "; fitting from the start";
+  }
+  fs::create_directories(dir, ec);
+  if (ec) return InternalError(dir.string(), ": cannot create folder: ", ec.message());
+  return WriteTextFileAtomic(file, manifest.ToJson().dump(2) + "\n");
+}
+
+// The post-fit phase: lobe transfer, albedo fill, material clusters, the maps and
+// fit_report.json, written into `dir`. `extra` is merged into the report.
+StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreReader& store,
+                                  const TexelAtlas& atlas, const FitOptions& options,
+                                  const std::string& backend_name, const std::string& device,
+                                  const std::string& backend_choice, FitPass* pass,
+                                  const fs::path& dir, const Json& extra,
+                                  std::chrono::steady_clock::time_point start) {
+  const SampleStoreInfo& info = store.info();
+  FitStore& fits = *pass->fits;
+  auto& cached = pass->cached;
+  const uint64_t cached_bytes = pass->cached_bytes;
+  const double read_seconds = pass->read_seconds, fit_seconds = pass->fit_seconds;
+  const size_t iso_chosen = pass->iso_chosen;
+  const VulkanFitStats& vulkan_stats = pass->vulkan_stats;
+  const bool used_vulkan = pass->used_vulkan;
+  const bool select_model =
+      options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
+  auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
+  FitRunSummary summary;
+  summary.device = device;
   // Lobe transfer (lobe_transfer.h): candidates from the maps, then a second pass over the
   // chunks that hold recipients to test them on their own samples.
   const auto transfer_start = std::chrono::steady_clock::now();
@@ -394,10 +491,10 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const auto write_start = std::chrono::steady_clock::now();
   ReleaseFreeHeap();
   REFLCAP_RETURN_IF_ERROR(
-      WriteFitMaps(staging.path(), atlas, &fits, sigma.get(), albedo_filled, clusters.cluster_of));
+      WriteFitMaps(dir, atlas, &fits, pass->sigma.get(), albedo_filled, clusters.cluster_of));
   clusters = MaterialClusters();
   albedo_filled = std::vector<uint8_t>();
-  REFLCAP_RETURN_IF_ERROR(sigma->Remove());
+  REFLCAP_RETURN_IF_ERROR(pass->sigma->Remove());
 
   std::vector<double> costs, chi2;
   double iterations = 0;
@@ -438,7 +535,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   Json report = {
       {"format", "reflcap-fit/1"},
       {"samples", fs::absolute(samples).string()},
-      {"backend", BackendName(backend)},
+      {"backend", backend_name},
       {"device", summary.device},
       {"options",
        {{"lobes", options.lobes},
@@ -510,6 +607,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
       {"texels_per_second", fit_seconds > 0 ? info.texels / fit_seconds : 0.0},
   };
   if (!backend_choice.empty()) report["backend_choice"] = backend_choice;
+  for (auto it = extra.begin(); it != extra.end(); ++it) report[it.key()] = it.value();
   if (used_vulkan) {
     // Where the Vulkan fitter's time went (wall-clock seconds summed over chunks; the device's
     // batches overlap the host's preparation and post-processing).
@@ -528,6 +626,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);
   report["timings_s"] = {{"read_wait", read_seconds},
+                         {"checkpoint_write", pass->checkpoint_seconds},
                          {"fit", fit_seconds},
                          {"lobe_transfer", transfer_seconds},
                          {"lobe_transfer_read_wait", transfer_chunk_read_seconds},
@@ -537,7 +636,223 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
                          {"albedo_fill", fill_seconds},
                          {"write_maps", write_seconds_so_far},
                          {"total", summary.total_seconds}};
-  REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / "fit_report.json", report.dump(2) + "\n"));
+  REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(dir / "fit_report.json", report.dump(2) + "\n"));
+  return summary;
+}
+
+}  // namespace
+
+StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Backend backend,
+                               const FitOptions& options, bool overwrite,
+                               const VulkanFitterOptions& vulkan, const std::string& backend_choice,
+                               const FitRunControl& control) {
+  const auto start = std::chrono::steady_clock::now();
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter,
+                           CreateFitter(backend, options.threads, vulkan));
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
+  const SampleStoreInfo& info = store->info();
+  REFLCAP_ASSIGN_OR_RETURN(TexelAtlas atlas, StoreAtlas(samples, info));
+  const bool sharded = control.shard.count > 1;
+  ChunkRange range{0, info.chunks};
+  if (sharded) {
+    REFLCAP_ASSIGN_OR_RETURN(range, ShardChunks(control.shard, info.chunks));
+  }
+  FitPartManifest manifest;
+  manifest.samples = fs::absolute(samples).lexically_normal().string();
+  REFLCAP_ASSIGN_OR_RETURN(manifest.fingerprint, SampleStoreFingerprint(samples));
+  manifest.texels = info.texels;
+  manifest.chunks = info.chunks;
+  manifest.chunk_texels = info.chunk_texels;
+  manifest.shard = control.shard;
+  manifest.range = range;
+  manifest.backend = BackendName(backend);
+  manifest.options = FitOptionsToJson(options);
+
+  REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
+  const fs::path checkpoint = CheckpointDir(staging.destination());
+  REFLCAP_RETURN_IF_ERROR(OpenCheckpoint(checkpoint, manifest, control.resume));
+
+  // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
+  // unknown sigmas.
+  FitPass pass;
+  pass.fits = std::make_unique<FitStore>(info.texels, options.lobes);
+  REFLCAP_ASSIGN_OR_RETURN(pass.sigma, SigmaSpill::Create(staging.path() / kSigmaScratchFile,
+                                                          info.texels, options.lobes));
+  pass.cached.resize(info.chunks);
+  const std::string device = fitter->device();
+  REFLCAP_RETURN_IF_ERROR(
+      FitChunks(*store, range, fitter.get(), options, checkpoint, control.resume, &pass));
+  // The fitter's per-worker workspaces and the chunk results are sized by the largest chunk;
+  // nothing needs them past the fit.
+  fitter.reset();
+  ReleaseFreeHeap();
+
+  std::error_code ec;
+  if (sharded) {
+    // The part: the checkpoint's chunk result files and the manifest with what this shard did.
+    pass.cached = {};
+    pass.sigma.reset();
+    Json part = manifest.ToJson();
+    part["device"] = device;
+    part["fitted_chunks"] = pass.fitted_chunks;
+    part["resumed_chunks"] = pass.resumed_chunks;
+    part["timings_s"] = {{"read_wait", pass.read_seconds},
+                         {"fit", pass.fit_seconds},
+                         {"checkpoint_write", pass.checkpoint_seconds},
+                         {"total", Seconds(start)}};
+    for (uint32_t c = range.begin; c < range.end; ++c) {
+      fs::rename(checkpoint / FitChunkFileName(c), staging.path() / FitChunkFileName(c), ec);
+      if (ec) {
+        return InternalError((checkpoint / FitChunkFileName(c)).string(), ": cannot move into ",
+                             staging.path().string(), ": ", ec.message());
+      }
+    }
+    fs::remove(staging.path() / kSigmaScratchFile, ec);
+    REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / kFitPartFile, part.dump(2) + "\n"));
+    REFLCAP_RETURN_IF_ERROR(staging.Commit());
+    fs::remove_all(checkpoint, ec);
+    FitRunSummary summary;
+    summary.texels = 0;
+    for (uint32_t c = range.begin; c < range.end; ++c) summary.texels += ChunkTexelCount(info, c);
+    summary.fit_seconds = pass.fit_seconds;
+    summary.total_seconds = Seconds(start);
+    summary.fits_per_second = pass.fit_seconds > 0
+                                  ? double(summary.texels) * ProblemsPerTexel(options.lobe_model) / pass.fit_seconds
+                                  : 0;
+    summary.device = device;
+    return summary;
+  }
+  Json extra = Json::object();
+  if (pass.resumed_chunks > 0) extra["resumed_chunks"] = pass.resumed_chunks;
+  REFLCAP_ASSIGN_OR_RETURN(FitRunSummary summary,
+                           FinishFit(samples, *store, atlas, options, BackendName(backend), device,
+                                     backend_choice, &pass, staging.path(), extra, start));
+  REFLCAP_RETURN_IF_ERROR(staging.Commit());
+  fs::remove_all(checkpoint, ec);
+  if (ec) REFLCAP_LOG(kWarning) << checkpoint.string() << ": cannot remove: " << ec.message();
+  return summary;
+}
+
+StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const fs::path& out,
+                                      bool overwrite, int threads, const fs::path& samples_override) {
+  const auto start = std::chrono::steady_clock::now();
+  if (parts.empty()) return InvalidArgumentError("merge: no parts given");
+  // The manifests: one store, one set of options, every shard exactly once.
+  std::vector<FitPartManifest> manifests;
+  std::vector<Json> part_json;
+  for (const fs::path& part : parts) {
+    const fs::path file = part / kFitPartFile;
+    auto text = ReadTextFile(file);
+    if (!text.ok()) {
+      return NotFoundError(part.string(), ": not a fit part (no ", kFitPartFile,
+                           "; a shard that has not finished leaves only ",
+                           CheckpointDir(part).filename().string(), ")");
+    }
+    Json json = Json::parse(*text, nullptr, false);
+    if (json.is_discarded()) return DataLossError(file.string(), ": not valid JSON");
+    REFLCAP_ASSIGN_OR_RETURN(FitPartManifest m, FitPartManifest::FromJson(json, file.string()));
+    if (!manifests.empty()) {
+      const std::string mismatch = manifests.front().Mismatch(m);
+      if (!mismatch.empty()) {
+        return FailedPreconditionError(file.string(), ": ", mismatch, " differs from ",
+                                       (parts.front() / kFitPartFile).string(),
+                                       ": the parts are not of one fit");
+      }
+    }
+    manifests.push_back(std::move(m));
+    part_json.push_back(std::move(json));
+  }
+  const FitPartManifest& first = manifests.front();
+  if (size_t(first.shard.count) != parts.size()) {
+    std::vector<bool> seen(size_t(first.shard.count), false);
+    for (const auto& m : manifests) seen[size_t(m.shard.index)] = true;
+    int missing = 0;
+    while (missing < first.shard.count && seen[size_t(missing)]) ++missing;
+    return FailedPreconditionError("merge: ", parts.size(), " parts given for a fit of ",
+                                   first.shard.count, " shards",
+                                   missing < first.shard.count
+                                       ? " (shard " + std::to_string(missing) + " is missing)"
+                                       : std::string(" (a shard is given twice)"));
+  }
+  std::vector<int> part_of_shard(size_t(first.shard.count), -1);
+  for (size_t i = 0; i < manifests.size(); ++i) {
+    int& slot = part_of_shard[size_t(manifests[i].shard.index)];
+    if (slot >= 0) {
+      return FailedPreconditionError((parts[i] / kFitPartFile).string(), ": shard ",
+                                     manifests[i].shard.index, " is also ",
+                                     (parts[size_t(slot)] / kFitPartFile).string());
+    }
+    slot = int(i);
+  }
+  uint32_t next_chunk = 0;
+  for (int s = 0; s < first.shard.count; ++s) {
+    const FitPartManifest& m = manifests[size_t(part_of_shard[size_t(s)])];
+    const fs::path file = parts[size_t(part_of_shard[size_t(s)])] / kFitPartFile;
+    REFLCAP_ASSIGN_OR_RETURN(ChunkRange expected, ShardChunks(m.shard, m.chunks));
+    if (m.range.begin != next_chunk || m.range.begin != expected.begin || m.range.end != expected.end) {
+      return DataLossError(file.string(), ": chunk_begin/chunk_end: ", m.range.begin, "..",
+                           m.range.end, ", expected ", expected.begin, "..", expected.end,
+                           " for shard ", s, "/", m.shard.count);
+    }
+    next_chunk = m.range.end;
+  }
+  // The store the parts were fitted from (its chunks feed lobe transfer and the clusters).
+  const fs::path samples = samples_override.empty() ? fs::path(first.samples) : samples_override;
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
+  REFLCAP_ASSIGN_OR_RETURN(std::string fingerprint, SampleStoreFingerprint(samples));
+  if (fingerprint != first.fingerprint) {
+    return FailedPreconditionError(samples.string(), ": store_fingerprint ", fingerprint,
+                                   " is not the ", first.fingerprint, " the parts were fitted from");
+  }
+  const SampleStoreInfo& info = store->info();
+  if (info.texels != first.texels || info.chunks != first.chunks) {
+    return FailedPreconditionError(samples.string(), ": not the store the parts were fitted from");
+  }
+  REFLCAP_ASSIGN_OR_RETURN(TexelAtlas atlas, StoreAtlas(samples, info));
+  FitOptions options;
+  REFLCAP_RETURN_IF_ERROR(FitOptionsFromJson(first.options, (parts.front() / kFitPartFile).string(), &options));
+  options.threads = threads;
+
+  REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
+  FitPass pass;
+  pass.fits = std::make_unique<FitStore>(info.texels, options.lobes);
+  REFLCAP_ASSIGN_OR_RETURN(pass.sigma, SigmaSpill::Create(staging.path() / kSigmaScratchFile,
+                                                          info.texels, options.lobes));
+  pass.cached.resize(info.chunks);
+  Json shard_list = Json::array();
+  std::string device;
+  for (int s = 0; s < first.shard.count; ++s) {
+    const size_t i = size_t(part_of_shard[size_t(s)]);
+    const Json& j = part_json[i];
+    for (uint32_t c = manifests[i].range.begin; c < manifests[i].range.end; ++c) {
+      REFLCAP_ASSIGN_OR_RETURN(std::vector<TexelFit> results,
+                               ReadFitChunk(parts[i] / FitChunkFileName(c), ChunkFirstTexel(info, c),
+                                            ChunkTexelCount(info, c), options.lobes));
+      REFLCAP_RETURN_IF_ERROR(Keep(ChunkFirstTexel(info, c), results, &pass));
+    }
+    const double fit_s = j.contains("timings_s") ? j["timings_s"].value("fit", 0.0) : 0.0;
+    const double read_s = j.contains("timings_s") ? j["timings_s"].value("read_wait", 0.0) : 0.0;
+    pass.fit_seconds += fit_s;
+    pass.read_seconds += read_s;
+    const std::string part_device = j.value("device", std::string());
+    if (device.empty()) device = part_device;
+    if (part_device != device) {
+      // Different CPU kernels (x86-64-v3 / v4) or devices round differently: the merged maps
+      // are then not bit-identical to any single run.
+      REFLCAP_LOG(kWarning) << "merge: shard " << s << " ran on \"" << part_device
+                            << "\", shard 0 on \"" << device << "\"";
+    }
+    shard_list.push_back({{"part", fs::absolute(parts[i]).lexically_normal().string()},
+                          {"chunk_begin", manifests[i].range.begin},
+                          {"chunk_end", manifests[i].range.end},
+                          {"device", part_device},
+                          {"fit_s", fit_s}});
+  }
+  Json extra = {{"shards", {{"count", first.shard.count}, {"parts", shard_list}}}};
+  REFLCAP_ASSIGN_OR_RETURN(FitRunSummary summary,
+                           FinishFit(samples, *store, atlas, options, first.backend, device, "",
+                                     &pass, staging.path(), extra, start));
   REFLCAP_RETURN_IF_ERROR(staging.Commit());
   return summary;
 }

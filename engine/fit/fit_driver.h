@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "engine/core/status.h"
+#include "engine/fit/fit_checkpoint.h"
 #include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
 #include "engine/fit/vulkan_fitter.h"
@@ -65,11 +66,36 @@ TexelModel TexelModelOf(const FitStore& fits, size_t t);
 // device's name and driver). Errors: NotFound/DataLoss from the store, Unavailable for a
 // backend this build or machine lacks, NotFound when `device` matches no device,
 // InvalidArgument for bad options.
+//
+// Every chunk's results are written to the checkpoint folder OUT.checkpoint as soon as they are
+// fitted (fit_checkpoint.h); it is deleted when FIT is in place. A run that finds that folder
+// refuses to start (FailedPrecondition) unless `control.resume`, which reads the chunks found
+// there instead of fitting them (when the folder is of the same store, options, backend and
+// shard; else FailedPrecondition naming the field) and gives maps bit-identical to an
+// uninterrupted run. With control.shard.count > 1, only the shard's chunks are fitted and OUT is
+// a part (fit_checkpoint.h) for MergeFitParts; its summary counts the shard's texels only.
+struct FitRunControl {
+  Shard shard;
+  bool resume = false;
+};
 StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
                                const std::filesystem::path& out, Backend backend,
                                const FitOptions& options, bool overwrite,
                                const VulkanFitterOptions& vulkan = {},
-                               const std::string& backend_choice = "");
+                               const std::string& backend_choice = "",
+                               const FitRunControl& control = {});
+
+// `reflcap merge` of fit parts: checks that `parts` are the shards 0..N-1 of one fit (one store
+// fingerprint, the same options, backend and N, each shard once, their chunk ranges tiling the
+// store), reads every chunk result file, then runs the post-fit phase (lobe transfer, albedo
+// fill, material clusters, maps) on the whole atlas exactly as RunFit does, into `out`: maps
+// bit-identical to a single run's. The store is read from `samples` when given, else from the
+// path the parts record. Errors (nothing written): FailedPrecondition for parts that do not
+// belong together, naming the part and the field; NotFound/DataLoss for a missing or corrupt
+// part file or chunk result file, naming it.
+StatusOr<FitRunSummary> MergeFitParts(const std::vector<std::filesystem::path>& parts,
+                                      const std::filesystem::path& out, bool overwrite, int threads,
+                                      const std::filesystem::path& samples = {});
 
 // Writes status.exr, params.exr and sigma.exr for the per-texel fits in `atlas` layout into
 // `dir`, one map at a time, each built straight from the store and the spill (no per-texel

@@ -1,0 +1,72 @@
+// `reflcap merge PARTS... --out DIR`: joins the parts that `--shard I/N` runs wrote into the
+// output one run would have written. Which stage the parts are of is read from them.
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "cli/cli.h"
+#include "engine/core/progress.h"
+#include "engine/fit/fit_driver.h"
+
+namespace reflcap::cli {
+namespace fs = std::filesystem;
+
+int RunMerge(int argc, char** argv) {
+  std::vector<std::string> part_names;
+  std::string out, samples;
+  int threads = 0;
+  bool overwrite = false;
+  ArgParser args(
+      "merge", "PARTS... --out DIR [--samples SAMPLES] [--threads N] [--overwrite]",
+      "Join the parts written by `reflcap fit --shard I/N` (one per shard, N in all) into the\n"
+      "FIT folder a single run writes: the parts must be of one sample store (its fingerprint),\n"
+      "one set of options and backend, each shard exactly once. The merge then runs the stages\n"
+      "that need the whole atlas (lobe transfer, albedo fill, material clusters) and writes the\n"
+      "maps: params.exr, sigma.exr and status.exr bit-identical to a single run's. Nothing is\n"
+      "written when a part is missing, duplicated, corrupt or of another run.");
+  args.AddPositionalList("PARTS", &part_names, "the part folders (any order)");
+  args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
+  args.AddString("samples", &samples, "SAMPLES",
+                 "the sample store the parts were fitted from (default: the path the parts "
+                 "record; give it when the store has moved)");
+  args.AddInt("threads", &threads, "worker threads (default 0 = all cores)");
+  args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
+  bool help = false;
+  if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
+    std::fprintf(stderr, "reflcap merge: %s\n", s.message().c_str());
+    return kExitUsage;
+  }
+  if (help) {
+    std::printf("%s", args.Help().c_str());
+    return 0;
+  }
+  if (out.empty()) {
+    std::fprintf(stderr, "reflcap merge: --out DIR is required\n");
+    return kExitUsage;
+  }
+  if (threads < 0) {
+    std::fprintf(stderr, "reflcap merge: --threads must be >= 0\n");
+    return kExitUsage;
+  }
+  std::vector<fs::path> parts(part_names.begin(), part_names.end());
+  std::error_code ec;
+  for (const fs::path& part : parts) {
+    if (!fs::is_directory(part, ec)) {
+      return ReportError("merge", NotFoundError(part.string(), ": no such part folder"));
+    }
+  }
+  if (fs::exists(parts.front() / fit::kFitPartFile, ec)) {
+    auto summary = fit::MergeFitParts(parts, out, overwrite, threads, samples);
+    if (!summary.ok()) return ReportError("merge", summary.status());
+    std::printf("merged %zu fit parts into %s: %zu texels (with samples %zu), %s\n", parts.size(),
+                out.c_str(), summary->texels, summary->texels_with_samples,
+                FormatDuration(summary->total_seconds).c_str());
+    return 0;
+  }
+  return ReportError("merge", NotFoundError(parts.front().string(),
+                                            ": not a part (no ", fit::kFitPartFile,
+                                            "): parts are what `reflcap fit --shard I/N` writes"));
+}
+
+}  // namespace reflcap::cli
