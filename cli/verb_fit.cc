@@ -153,7 +153,7 @@ int RunFit(int argc, char** argv) {
     return kExitUsage;
   }
   if (!shard_text.empty()) {
-    auto shard = fit::ParseShard(shard_text);
+    auto shard = ParseShard(shard_text);
     if (!shard.ok()) {
       std::fprintf(stderr, "reflcap fit: %s\n", shard.status().message().c_str());
       return kExitUsage;

@@ -10,6 +10,7 @@
 #include "engine/capture/capture.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
+#include "engine/core/shard.h"
 #include "engine/mesh/texel_atlas.h"
 
 namespace reflcap::cli {
@@ -66,6 +67,15 @@ int RunResample(int argc, char** argv) {
   args.AddInt("chunk-texels", &chunk_texels,
               StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,
                      "); the unit `fit --shard` divides and `fit --resume` checkpoints"));
+  bool no_checkpoint = false;
+  args.AddFlag("resume", &options.resume,
+               "continue an interrupted resample from SAMPLES.checkpoint (same capture and options)");
+  args.AddDouble("checkpoint-seconds", &options.checkpoint_seconds,
+                 StrCat("save the state to SAMPLES.checkpoint every S seconds of work (default ",
+                        resample::kDefaultCheckpointSeconds, "; 0 = after every photograph)"));
+  args.AddFlag("no-checkpoint", &no_checkpoint,
+               "keep no checkpoint (a killed run starts over; the spill files stay in the staging "
+               "folder)");
   args.AddInt("threads", &options.threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite,
                "replace SAMPLES if it exists (only once the new one is complete)");
@@ -100,6 +110,10 @@ int RunResample(int argc, char** argv) {
     return kExitUsage;
   }
   options.chunk_texels = uint32_t(chunk_texels);
+  if (options.resume && no_checkpoint) {
+    std::fprintf(stderr, "reflcap resample: --resume and --no-checkpoint exclude each other\n");
+    return kExitUsage;
+  }
   if (Status s = options.Validate(); !s.ok()) {
     std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
     return kExitUsage;
@@ -116,9 +130,15 @@ int RunResample(int argc, char** argv) {
   }
   auto staging = StagingDir::Create(out, overwrite);
   if (!staging.ok()) return ReportError("resample", staging.status());
+  if (!no_checkpoint) options.checkpoint_dir = CheckpointDir(staging->destination());
   auto summary = resample::ResampleCapture(*capture, options, staging->path());
   if (!summary.ok()) return ReportError("resample", summary.status());
   if (Status s = staging->Commit(); !s.ok()) return ReportError("resample", s);
+  if (!options.checkpoint_dir.empty()) {
+    std::error_code ec;
+    fs::remove_all(options.checkpoint_dir, ec);
+    if (ec) REFLCAP_LOG(kWarning) << options.checkpoint_dir.string() << ": cannot remove: " << ec.message();
+  }
   std::printf("%s", summary->text.c_str());
   std::printf("  sample store %s; report %s; coverage %s\n", out.c_str(),
               (fs::path(out) / "resample_report.json").string().c_str(),

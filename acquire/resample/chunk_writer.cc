@@ -5,6 +5,9 @@
 #include <atomic>
 #include <mutex>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include "engine/core/parallel.h"
 #include "engine/texel/sample_store.h"
 
@@ -48,6 +51,7 @@ StatusOr<std::unique_ptr<ChunkedSampleWriter>> ChunkedSampleWriter::Create(
 }
 
 ChunkedSampleWriter::~ChunkedSampleWriter() {
+  if (keep_spill_ && !finished_) return;
   std::error_code ec;
   fs::remove_all(spill_dir_, ec);
 }
@@ -87,6 +91,56 @@ Status ChunkedSampleWriter::Flush(uint32_t chunk) {
   spilled_records_[chunk] += buffer.size();
   spilled_bytes_ += bytes;
   buffer.clear();  // keeps the capacity: this chunk will fill again
+  return OkStatus();
+}
+
+StatusOr<std::vector<uint64_t>> ChunkedSampleWriter::FlushAll() {
+  for (uint32_t c = 0; c < chunks_; ++c) {
+    REFLCAP_RETURN_IF_ERROR(Flush(c));
+    if (spilled_records_[c] == 0) continue;
+    // The records must be on disk before a checkpoint names their count.
+    const fs::path path = SpillPath(c);
+    const int fd = ::open(path.c_str(), O_RDONLY);
+    if (fd < 0 || ::fsync(fd) != 0) {
+      if (fd >= 0) ::close(fd);
+      return InternalError(path.string(), ": cannot sync spill file");
+    }
+    ::close(fd);
+  }
+  return spilled_records_;
+}
+
+Status ChunkedSampleWriter::Restore(const std::vector<uint64_t>& spilled_records,
+                                    std::vector<uint32_t> texel_counts) {
+  REFLCAP_CHECK(samples_ == 0 && spilled_records.size() == chunks_ && texel_counts.size() == texels_);
+  for (uint32_t c = 0; c < chunks_; ++c) {
+    const fs::path path = SpillPath(c);
+    const uint64_t bytes = spilled_records[c] * sizeof(TexelSample);
+    std::error_code ec;
+    const uintmax_t size = fs::exists(path, ec) ? fs::file_size(path, ec) : 0;
+    if (ec || size < bytes) {
+      return DataLossError(path.string(), ": spill file holds ", size / sizeof(TexelSample),
+                           " records, the checkpoint counts ", spilled_records[c]);
+    }
+    if (size > bytes) {
+      fs::resize_file(path, bytes, ec);
+      if (ec) return InternalError(path.string(), ": cannot truncate spill file: ", ec.message());
+    }
+    spilled_bytes_ += bytes;
+  }
+  spilled_records_ = spilled_records;
+  uint64_t total = 0;
+  std::vector<uint64_t> per_chunk(chunks_, 0);
+  for (uint32_t t = 0; t < texels_; ++t) {
+    total += texel_counts[t];
+    per_chunk[t / chunk_texels_] += texel_counts[t];
+  }
+  if (per_chunk != spilled_records) {
+    return DataLossError(spill_dir_.string(), ": the checkpoint's per-texel counts do not add up to "
+                                              "its spill files' records");
+  }
+  texel_counts_ = std::move(texel_counts);
+  samples_ = total;
   return OkStatus();
 }
 

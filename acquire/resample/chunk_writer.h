@@ -46,6 +46,19 @@ class ChunkedSampleWriter {
   // time (0 = all cores), then removes the spill folder. Call once.
   Status Finish(const std::filesystem::path& out_dir, int threads = 0);
 
+  // Checkpoint support (resample --resume). FlushAll writes every buffer to its spill file and
+  // syncs the files to disk, so the spill files hold every record appended so far; it returns
+  // each chunk's record count. Restore, on a writer just created over the same spill folder,
+  // takes the state of such a point back: each spill file is cut to its count (records appended
+  // after the checkpoint are dropped) and the per-texel counts are `texel_counts` (the kept
+  // samples per texel at that point). DataLoss naming the file when a spill file holds fewer
+  // records than its count.
+  StatusOr<std::vector<uint64_t>> FlushAll();
+  Status Restore(const std::vector<uint64_t>& spilled_records, std::vector<uint32_t> texel_counts);
+  // Leave the spill folder in place when the writer is destroyed before Finish (a checkpointed
+  // run that fails can be resumed); Finish removes it in any case.
+  void KeepSpillOnError() { keep_spill_ = true; }
+
   uint32_t chunks() const { return chunks_; }
   uint64_t samples() const { return samples_; }
   // Samples of texel t appended so far.
@@ -73,6 +86,7 @@ class ChunkedSampleWriter {
   uint64_t samples_ = 0;
   uint64_t spilled_bytes_ = 0;
   bool finished_ = false;
+  bool keep_spill_ = false;
 };
 
 // The chunks ChunkedSampleWriter writes for `samples` appended in this order, built in memory by a

@@ -3,10 +3,13 @@
 
 #include <algorithm>
 #include <bitset>
+#include <cstring>
 #include <cmath>
 #include <limits>
 
+#include "engine/core/atomic_file.h"
 #include "engine/core/parallel.h"
+#include "engine/texel/sample_store.h"
 #include "engine/math/safe_math.h"
 #include "engine/math/types.h"
 
@@ -88,6 +91,86 @@ void TexelCoverage::AddImage(const std::vector<uint8_t>& outcome,
 
 int TexelCoverage::cells(size_t t) const {
   return int(std::bitset<64>(cells_[t][0]).count() + std::bitset<64>(cells_[t][1]).count());
+}
+
+void TexelCoverage::Merge(const TexelCoverage& other) {
+  REFLCAP_CHECK(other.texels() == texels()) << other.texels() << " vs " << texels() << " texels";
+  for (size_t t = 0; t < texels(); ++t) {
+    samples_[t] += other.samples_[t];
+    views_[t] = uint16_t(std::min<uint32_t>(std::numeric_limits<uint16_t>::max(),
+                                            uint32_t(views_[t]) + other.views_[t]));
+    if (other.last_view_[t] >= 0) last_view_[t] = other.last_view_[t];
+    seen_[t] |= other.seen_[t];
+    observations_[t] += other.observations_[t];
+    cells_[t][0] |= other.cells_[t][0];
+    cells_[t][1] |= other.cells_[t][1];
+    min_half_deg_[t] = std::min(min_half_deg_[t], other.min_half_deg_[t]);
+  }
+}
+
+namespace {
+
+// coverage file: magic, texel count, payload CRC-32, then the arrays in declaration order.
+constexpr char kCoverageMagic[8] = {'R', 'F', 'L', 'C', 'C', 'O', 'V', '1'};
+
+template <typename T>
+void Append(std::string* out, const std::vector<T>& v) {
+  out->append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+}
+template <typename T>
+bool Take(const std::string& in, size_t* at, std::vector<T>* v) {
+  const size_t bytes = v->size() * sizeof(T);
+  if (in.size() - *at < bytes) return false;
+  std::memcpy(v->data(), in.data() + *at, bytes);
+  *at += bytes;
+  return true;
+}
+
+}  // namespace
+
+Status TexelCoverage::Save(const std::filesystem::path& path) const {
+  std::string payload;
+  Append(&payload, samples_);
+  Append(&payload, views_);
+  Append(&payload, last_view_);
+  Append(&payload, seen_);
+  Append(&payload, observations_);
+  Append(&payload, cells_);
+  Append(&payload, min_half_deg_);
+  std::string file(kCoverageMagic, 8);
+  const uint64_t texels = samples_.size();
+  const uint32_t crc = Crc32(payload.data(), payload.size());
+  file.append(reinterpret_cast<const char*>(&texels), sizeof texels);
+  file.append(reinterpret_cast<const char*>(&crc), sizeof crc);
+  file += payload;
+  return WriteTextFileAtomic(path, file);
+}
+
+StatusOr<TexelCoverage> TexelCoverage::Load(const std::filesystem::path& path, size_t texels) {
+  REFLCAP_ASSIGN_OR_RETURN(std::string file, ReadTextFile(path));
+  const std::string name = path.string();
+  constexpr size_t kHeader = 8 + sizeof(uint64_t) + sizeof(uint32_t);
+  if (file.size() < kHeader || file.compare(0, 8, kCoverageMagic, 8) != 0) {
+    return DataLossError(name, ": not a reflcap coverage file (bad magic or truncated)");
+  }
+  uint64_t count = 0;
+  uint32_t crc = 0;
+  std::memcpy(&count, file.data() + 8, sizeof count);
+  std::memcpy(&crc, file.data() + 16, sizeof crc);
+  if (count != texels) {
+    return DataLossError(name, ": texels: holds ", count, " texels, expected ", texels);
+  }
+  if (Crc32(file.data() + kHeader, file.size() - kHeader) != crc) {
+    return DataLossError(name, ": corrupt coverage file (checksum mismatch or truncated)");
+  }
+  TexelCoverage c(texels);
+  size_t at = kHeader;
+  const bool ok = Take(file, &at, &c.samples_) && Take(file, &at, &c.views_) &&
+                  Take(file, &at, &c.last_view_) && Take(file, &at, &c.seen_) &&
+                  Take(file, &at, &c.observations_) && Take(file, &at, &c.cells_) &&
+                  Take(file, &at, &c.min_half_deg_);
+  if (!ok || at != file.size()) return DataLossError(name, ": coverage file has the wrong size");
+  return c;
 }
 
 }  // namespace reflcap::resample

@@ -13,7 +13,10 @@
 // Lafortune lobe of exponent n has its peak within about 1/sqrt(n) rad of it (θh of half that).
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <vector>
+
+#include "engine/core/status.h"
 
 #include "acquire/resample/chunk_writer.h"
 #include "acquire/resample/image_resampler.h"
@@ -49,6 +52,18 @@ class TexelCoverage {
   uint32_t observations(size_t t) const { return observations_[t]; }  // Observed() photographs
   int cells(size_t t) const;              // distinct domain cells hit
   float min_half_angle_deg(size_t t) const { return min_half_deg_[t]; }  // 90 when no sample
+
+  // Adds the coverage of other photographs of the same texels, taken from other views than
+  // this one's (shards of a capture split at view boundaries): counts add up, seen flags and
+  // domain cells are united, the smaller half-vector angle is kept. The views counted by each
+  // must be distinct for the views counts to add up. Checked: the same texel count.
+  void Merge(const TexelCoverage& other);
+
+  // The whole state (also each texel's last view) to a file, atomically, with a CRC-32 over the
+  // payload; and back. Load: NotFound when missing, DataLoss naming the file when it is
+  // truncated, corrupt or of another texel count.
+  Status Save(const std::filesystem::path& path) const;
+  static StatusOr<TexelCoverage> Load(const std::filesystem::path& path, size_t texels);
 
  private:
   std::vector<uint32_t> samples_;

@@ -19,6 +19,7 @@
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
 #include "engine/core/progress.h"
+#include "engine/core/shard.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
@@ -160,6 +161,78 @@ Image CoveragePng(const TexelAtlas& atlas, const TexelCoverage& coverage) {
   return png;
 }
 
+
+// ---- Checkpoints (ResampleOptions::checkpoint_dir) --------------------------------------------
+constexpr const char* kCheckpointFormat = "reflcap-resample-checkpoint/1";
+constexpr const char* kCheckpointFile = "checkpoint.json";
+
+// What a checkpoint must match to be continued: the capture's bytes, the options that change a
+// sample, the atlas and the photographs' order.
+Json CheckpointIdentity(const Capture& capture, const ResampleOptions& options,
+                        const TexelAtlas& atlas, const NoiseChoice& noise,
+                        const std::vector<std::pair<int, uint32_t>>& order) {
+  const StatusOr<std::string> text = ReadTextFile(capture.json_path);
+  const uint32_t capture_crc = text.ok() ? Crc32(text->data(), text->size()) : 0;
+  std::vector<uint32_t> images;
+  for (const auto& o : order) images.push_back(o.second);
+  std::error_code ec;
+  return Json{{"capture", fs::absolute(capture.json_path, ec).lexically_normal().string()},
+              {"capture_crc32", capture_crc},
+              {"split", SplitSelectionName(options.split)},
+              {"min_cos", options.min_cos},
+              {"atlas", {atlas.width, atlas.height, atlas.TexelCount()}},
+              {"chunk_texels", options.chunk_texels},
+              {"backend", BackendName(options.backend)},
+              {"noise", {noise.model.photon_sigma_at_1, noise.model.read_sigma, noise.saturation}},
+              {"variance_weights", options.use_variance},
+              {"height_shadows", options.height_shadows},
+              {"images", images.size()},
+              {"images_crc32", Crc32(images.data(), images.size() * sizeof(uint32_t))}};
+}
+
+// The first key whose value differs ("" when none).
+std::string FirstDifference(const Json& a, const Json& b) {
+  for (auto it = a.begin(); it != a.end(); ++it) {
+    if (!b.contains(it.key()) || b[it.key()] != it.value()) return it.key();
+  }
+  return a.size() == b.size() ? "" : "(keys)";
+}
+
+// The counters a run sums over its photographs, saved with a checkpoint.
+struct Tally {
+  std::array<uint64_t, kOutcomeCount> outcome_counts{};
+  uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
+  uint64_t variance_images = 0;
+  double read_wait_s = 0, resample_s = 0, stream_s = 0, gpu_s = 0;
+
+  Json ToJson() const {
+    return Json{{"outcome_counts", outcome_counts},
+                {"rays", {primary_rays, tap_shadow_rays, visibility_rays, shadow_rays}},
+                {"variance_images", variance_images},
+                {"seconds", {read_wait_s, resample_s, stream_s, gpu_s}}};
+  }
+  // False when a field is missing or mistyped.
+  bool FromJson(const Json& j) {
+    try {
+      outcome_counts = j.at("outcome_counts").get<std::array<uint64_t, kOutcomeCount>>();
+      const auto rays = j.at("rays").get<std::array<uint64_t, 4>>();
+      primary_rays = rays[0];
+      tap_shadow_rays = rays[1];
+      visibility_rays = rays[2];
+      shadow_rays = rays[3];
+      variance_images = j.at("variance_images").get<uint64_t>();
+      const auto seconds = j.at("seconds").get<std::array<double, 4>>();
+      read_wait_s = seconds[0];
+      resample_s = seconds[1];
+      stream_s = seconds[2];
+      gpu_s = seconds[3];
+    } catch (const Json::exception&) {
+      return false;
+    }
+    return true;
+  }
+};
+
 }  // namespace
 
 StatusOr<Backend> ParseBackend(const std::string& name) {
@@ -209,6 +282,9 @@ Status ResampleOptions::Validate() const {
   }
   if (chunk_texels == 0) return InvalidArgumentError("chunk_texels must be >= 1");
   if (threads < 0) return InvalidArgumentError("threads must be >= 0");
+  if (!(checkpoint_seconds >= 0) || !std::isfinite(checkpoint_seconds)) {
+    return InvalidArgumentError("--checkpoint-seconds: must be >= 0, got ", checkpoint_seconds);
+  }
   if (cross_check && backend != Backend::kVulkan) {
     return InvalidArgumentError("--cross-check compares the Vulkan masks with Embree: it needs "
                                 "--backend vulkan");
@@ -324,7 +400,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   const bool cross_check = options.cross_check && masks != nullptr;
   MaskAgreement agreement;
-  double gpu_s = 0, cross_check_s = 0;
+  double cross_check_s = 0;
   VulkanMaskStats mask_stats;
 
   // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
@@ -354,16 +430,131 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   const double setup_s = Seconds(start);
 
+  // ---- Checkpoint: start one, or continue from one ----------------------------------------------
+  const bool checkpointing = !options.checkpoint_dir.empty() && !cross_check;
+  if (!options.checkpoint_dir.empty() && cross_check) {
+    REFLCAP_LOG(kWarning) << "--cross-check: no checkpoints (the agreement statistics are not "
+                             "checkpointed); a killed run starts over";
+  }
+  const fs::path checkpoint_dir = options.checkpoint_dir;
+  const fs::path spill_dir = checkpointing ? checkpoint_dir / "spill" : out_dir / ".spill";
+  Json identity;
+  std::optional<Json> resume_state;
+  if (checkpointing) {
+    identity = CheckpointIdentity(capture, options, atlas, noise, order);
+    std::error_code ec;
+    if (fs::exists(checkpoint_dir, ec)) {
+      if (!options.resume) {
+        return FailedPreconditionError(
+            checkpoint_dir.string(), ": holds the state of an interrupted resample to this output "
+                                     "(pass --resume to continue it, or delete the folder to start "
+                                     "over)");
+      }
+      const fs::path state_file = checkpoint_dir / kCheckpointFile;
+      if (fs::exists(state_file, ec)) {
+        REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadTextFile(state_file));
+        Json state = Json::parse(text, nullptr, false);
+        if (!state.is_object() || state.value("format", "") != kCheckpointFormat ||
+            !state.contains("identity")) {
+          return DataLossError(state_file.string(), ": not a resample checkpoint");
+        }
+        const std::string differs = FirstDifference(identity, state["identity"]);
+        if (!differs.empty()) {
+          return FailedPreconditionError(state_file.string(), ": identity.", differs,
+                                         " differs from this run: the checkpoint belongs to another "
+                                         "resample (delete ", checkpoint_dir.string(),
+                                         " to start over)");
+        }
+        resume_state = std::move(state);
+      } else {
+        // Killed before its first checkpoint: nothing to keep.
+        fs::remove_all(spill_dir, ec);
+      }
+    } else if (options.resume) {
+      REFLCAP_LOG(kWarning) << "resample: --resume: no checkpoint at " << checkpoint_dir.string()
+                            << "; resampling from the start";
+    }
+    fs::create_directories(checkpoint_dir, ec);
+    if (ec) return InternalError(checkpoint_dir.string(), ": cannot create folder: ", ec.message());
+  }
+  // A run that fails before its first checkpoint leaves no folder behind (the CLI removes it
+  // after a successful run).
+  std::optional<CheckpointCleanup> cleanup;
+  if (checkpointing) cleanup.emplace(checkpoint_dir, kCheckpointFile);
+
   // ---- Resample, streaming into chunks ------------------------------------------------------
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<ChunkedSampleWriter> writer,
-                           ChunkedSampleWriter::Create(out_dir / ".spill", uint32_t(texels),
+                           ChunkedSampleWriter::Create(spill_dir, uint32_t(texels),
                                                        options.chunk_texels,
                                                        options.spill_buffer_bytes));
+  if (checkpointing) writer->KeepSpillOnError();
   TexelCoverage coverage(texels);
-  std::array<uint64_t, kOutcomeCount> outcome_counts{};
-  uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
-  uint64_t variance_images = 0;  // photographs weighted by their images[].variance
-  double read_wait_s = 0, resample_s = 0, stream_s = 0;
+  Tally tally;
+  size_t first_image = 0;
+  std::string last_coverage_file;
+  if (resume_state) {
+    const Json& state = *resume_state;
+    const fs::path state_file = checkpoint_dir / kCheckpointFile;
+    if (!state.contains("images_done") || !state["images_done"].is_number_unsigned() ||
+        !state.contains("spill_records") || !state.contains("coverage_file") ||
+        !state["coverage_file"].is_string() || !state.contains("tally") ||
+        !tally.FromJson(state["tally"])) {
+      return DataLossError(state_file.string(), ": images_done/spill_records/coverage_file/tally: "
+                                                "missing or malformed");
+    }
+    first_image = state["images_done"].get<size_t>();
+    std::vector<uint64_t> records;
+    try {
+      records = state["spill_records"].get<std::vector<uint64_t>>();
+    } catch (const Json::exception&) {
+      return DataLossError(state_file.string(), ": spill_records: expected a list of counts");
+    }
+    if (first_image == 0 || first_image >= order.size() || records.size() != writer->chunks()) {
+      return DataLossError(state_file.string(), ": images_done ", first_image, " / spill_records ",
+                           records.size(), " do not fit this run (", order.size(), " images, ",
+                           writer->chunks(), " chunks)");
+    }
+    last_coverage_file = state["coverage_file"].get<std::string>();
+    REFLCAP_ASSIGN_OR_RETURN(coverage, TexelCoverage::Load(checkpoint_dir / last_coverage_file, texels));
+    std::vector<uint32_t> counts(texels);
+    for (size_t t = 0; t < texels; ++t) counts[t] = coverage.samples(t);
+    REFLCAP_RETURN_IF_ERROR(writer->Restore(records, std::move(counts)));
+    REFLCAP_LOG(kInfo) << "resample: resumed after " << first_image << " of " << order.size()
+                       << " photographs from " << checkpoint_dir.string();
+  }
+  // Makes the state after `images_done` photographs durable in the checkpoint folder: spill
+  // files synced, coverage written under a new name, then checkpoint.json (atomically) naming
+  // both; the previous coverage file goes last, so a kill at any point leaves one consistent
+  // checkpoint.
+  auto checkpoint = [&](size_t images_done) -> Status {
+    REFLCAP_ASSIGN_OR_RETURN(std::vector<uint64_t> records, writer->FlushAll());
+    const std::string coverage_file = StrCat("coverage_", images_done, ".bin");
+    REFLCAP_RETURN_IF_ERROR(coverage.Save(checkpoint_dir / coverage_file));
+    const Json state = {{"format", kCheckpointFormat},
+                        {"identity", identity},
+                        {"images_done", images_done},
+                        {"spill_records", records},
+                        {"coverage_file", coverage_file},
+                        {"tally", tally.ToJson()}};
+    REFLCAP_RETURN_IF_ERROR(
+        WriteTextFileAtomic(checkpoint_dir / kCheckpointFile, state.dump(1) + "\n"));
+    if (!last_coverage_file.empty() && last_coverage_file != coverage_file) {
+      std::error_code ec;
+      fs::remove(checkpoint_dir / last_coverage_file, ec);
+    }
+    last_coverage_file = coverage_file;
+    return OkStatus();
+  };
+  auto last_checkpoint = Clock::now();
+  std::array<uint64_t, kOutcomeCount>& outcome_counts = tally.outcome_counts;
+  uint64_t& primary_rays = tally.primary_rays;
+  uint64_t& tap_shadow_rays = tally.tap_shadow_rays;
+  uint64_t& visibility_rays = tally.visibility_rays;
+  uint64_t& shadow_rays = tally.shadow_rays;
+  uint64_t& variance_images = tally.variance_images;  // photographs weighted by images[].variance
+  double& read_wait_s = tally.read_wait_s;
+  double& resample_s = tally.resample_s;
+  double& stream_s = tally.stream_s;
   // A photograph and, when it has one and it is used, its variance image (read together).
   struct Photograph {
     StatusOr<Image> pixels = Image();
@@ -381,10 +572,11 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     });
   };
   Progress progress("resample", int64_t(order.size()));
-  std::future<Photograph> next = read_image(order[0].second);
+  if (first_image > 0) progress.Advance(int64_t(first_image));
+  std::future<Photograph> next = read_image(order[first_image].second);
   ImageOutput output, embree_output;
   CameraMapView camera_map;
-  for (size_t k = 0; k < order.size(); ++k) {
+  for (size_t k = first_image; k < order.size(); ++k) {
     const uint32_t index = order[k].second;
     auto t0 = Clock::now();
     Photograph photo = next.get();
@@ -403,7 +595,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     if (masks != nullptr) {
       REFLCAP_RETURN_IF_ERROR(masks->Process(index, *pixels, &output,
                                              cross_check ? &camera_map : nullptr, variance));
-      gpu_s += masks->last_stats().gpu_seconds;
+      tally.gpu_s += masks->last_stats().gpu_seconds;
       mask_stats = masks->last_stats();
     } else {
       REFLCAP_RETURN_IF_ERROR(resampler->Process(index, *pixels, &output, variance));
@@ -426,6 +618,11 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     REFLCAP_RETURN_IF_ERROR(writer->Append(output.kept.data(), output.kept.size()));
     stream_s += Seconds(t0);
     progress.Advance();
+    if (checkpointing && k + 1 < order.size() &&
+        Seconds(last_checkpoint) >= options.checkpoint_seconds) {
+      REFLCAP_RETURN_IF_ERROR(checkpoint(k + 1));
+      last_checkpoint = Clock::now();
+    }
   }
   progress.Finish();
   output = ImageOutput();
@@ -712,7 +909,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     report["vulkan"] = {{"light_map", mask_stats.light_map},
                         {"light_map_resolution", mask_stats.light_resolution},
                         {"camera_map", {mask_stats.map_width, mask_stats.map_height}},
-                        {"gpu_s", gpu_s},
+                        {"gpu_s", tally.gpu_s},
                         {"note", "gpu_s: submit + fence wait of the per-photograph submissions "
                                  "(light map, camera map, per-texel tests); on lavapipe the "
                                  "'GPU' is the CPU"}};

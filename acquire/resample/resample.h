@@ -58,6 +58,10 @@ constexpr double kDefaultMinCos = 0.15;
 // Texels per chunk file: 16384 texels of ~50 samples are ~40 MB, a convenient unit to read,
 // fit and free; a 1,000,000-texel atlas makes 62 files.
 constexpr uint32_t kDefaultChunkTexels = 16384;
+// How often a checkpointed resample saves its state: a killed run loses at most this much work;
+// each checkpoint costs a sync of the spill files and ~35 bytes per texel of coverage state
+// (35 MB at a million texels, well under a second).
+constexpr double kDefaultCheckpointSeconds = 30;
 // Memory budget of the reorder buffers (all chunks together) before they spill to disk.
 constexpr size_t kDefaultSpillBufferBytes = size_t(128) << 20;
 // Noise model of a capture that records none (no ground_truth.noise; see NoiseModel): photon
@@ -104,6 +108,18 @@ struct ResampleOptions {
   // is skipped with a warning and the report says why. Mesh captures ignore it.
   bool height_shadows = true;
   uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
+  // Checkpoints (`resample --resume`). When not empty, the reorder's spill files live in this
+  // folder (the CLI uses OUT.checkpoint beside OUT) and, every checkpoint_seconds of work (0:
+  // after every photograph), the run's state is made durable there: the spill files synced, the
+  // per-texel coverage and the counters written, then checkpoint.json naming how many
+  // photographs they hold. With `resume`, a run continues from the last checkpoint (the spill
+  // files cut back to it) when the folder is of the same capture and options, and its store is
+  // bit-identical to an uninterrupted run's; without `resume` an existing folder is refused
+  // (`resume` without a folder does nothing). Not
+  // with cross_check (its agreement statistics are not checkpointed): no checkpoints then.
+  std::filesystem::path checkpoint_dir;
+  bool resume = false;
+  double checkpoint_seconds = kDefaultCheckpointSeconds;
   size_t spill_buffer_bytes = kDefaultSpillBufferBytes;
   int threads = 0;  // 0 = all cores
 

@@ -17,10 +17,6 @@ using Json = nlohmann::json;
 
 namespace {
 
-// Texels per chunk are bounded by the sample store; this bounds a shard count well above any
-// job array a batch system takes (Slurm's MaxArraySize defaults to 1001).
-constexpr int kMaxShards = 100000;
-
 #pragma pack(push, 1)
 struct FitChunkHeader {
   char magic[8];
@@ -96,37 +92,14 @@ std::string Hex(uint32_t v) {
 
 }  // namespace
 
-StatusOr<Shard> ParseShard(const std::string& text) {
-  int index = -1, count = -1;
-  char tail = 0;
-  if (std::sscanf(text.c_str(), "%d/%d%c", &index, &count, &tail) != 2 || count < 1 ||
-      count > kMaxShards || index < 0 || index >= count) {
-    return InvalidArgumentError("--shard \"", text, "\": expected I/N with 0 <= I < N <= ",
-                                kMaxShards, " (e.g. 0/8 for the first of 8 shards)");
-  }
-  return Shard{index, count};
-}
-
 StatusOr<ChunkRange> ShardChunks(Shard shard, uint32_t chunks) {
-  if (uint32_t(shard.count) > chunks) {
-    return InvalidArgumentError("--shard ", shard.index, "/", shard.count, ": the sample store has ",
-                                chunks, " chunk", chunks == 1 ? "" : "s",
-                                ", so at most that many shards (each shard takes whole chunks)");
-  }
-  const uint64_t c = chunks;
-  return ChunkRange{uint32_t(shard.index * c / shard.count), uint32_t((shard.index + 1) * c / shard.count)};
+  return ShardRange(shard, chunks, "chunks in the sample store");
 }
 
 std::string FitChunkFileName(uint32_t chunk) {
   char name[32];
   std::snprintf(name, sizeof name, "fits_%05u.rcf", chunk);
   return name;
-}
-
-fs::path CheckpointDir(const fs::path& out) {
-  fs::path dir = out;
-  if (!dir.has_filename()) dir = dir.parent_path();  // "FIT/" -> "FIT"
-  return dir.parent_path() / (dir.filename().string() + ".checkpoint");
 }
 
 Status WriteFitChunk(const fs::path& path, uint32_t first_texel, int lobes,

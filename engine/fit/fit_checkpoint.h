@@ -46,6 +46,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/core/shard.h"
 #include "engine/core/status.h"
 #include "engine/fit/fitter.h"
 
@@ -57,26 +58,13 @@ constexpr const char* kFitPartFormat = "reflcap-fit-part/1";
 constexpr const char* kFitPartFile = "fit_part.json";
 constexpr const char* kFitCheckpointFile = "checkpoint.json";
 
-// Shard `index` of `count` (0 <= index < count): `--shard I/N`.
-struct Shard {
-  int index = 0;
-  int count = 1;
-};
-// "3/8" -> {3, 8}. InvalidArgument (naming --shard) unless 0 <= I < N <= 100000.
-StatusOr<Shard> ParseShard(const std::string& text);
-// Chunks [begin, end) of shard `shard` among `chunks`: floor(I C / N) .. floor((I + 1) C / N),
-// contiguous, in order, every chunk in exactly one shard. InvalidArgument when N > chunks (a
-// shard would be empty).
-struct ChunkRange {
-  uint32_t begin = 0;
-  uint32_t end = 0;
-};
+// Chunks [begin, end) of shard `shard` among `chunks` (ShardRange): InvalidArgument when N >
+// chunks (a shard would be empty).
+using ChunkRange = ItemRange;
 StatusOr<ChunkRange> ShardChunks(Shard shard, uint32_t chunks);
 
 // "fits_00042.rcf".
 std::string FitChunkFileName(uint32_t chunk);
-// OUT.checkpoint beside OUT.
-std::filesystem::path CheckpointDir(const std::filesystem::path& out);
 
 // Writes the first `lobes` lobes of every result (parameters, sigmas and scalars) atomically.
 Status WriteFitChunk(const std::filesystem::path& path, uint32_t first_texel, int lobes,

@@ -672,6 +672,9 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   REFLCAP_ASSIGN_OR_RETURN(StagingDir staging, StagingDir::Create(out, overwrite));
   const fs::path checkpoint = CheckpointDir(staging.destination());
   REFLCAP_RETURN_IF_ERROR(OpenCheckpoint(checkpoint, manifest, control.resume));
+  // A run that fails before its first chunk is saved leaves no checkpoint behind; one that
+  // saved chunks keeps them for --resume (and a finished run removes the folder below).
+  CheckpointCleanup cleanup(checkpoint, ".rcf");
 
   // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
   // unknown sigmas.

@@ -1,16 +1,23 @@
 #include "tests/support/test_support.h"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdlib>
 #include <fstream>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
 #include "engine/core/atomic_file.h"
 #include "engine/core/check.h"
+
+extern char** environ;
 
 namespace reflcap::testing {
 namespace fs = std::filesystem;
@@ -81,6 +88,32 @@ CliResult RunCommand(const std::string& binary, const std::string& args, const S
   r.out = ReadTextFile(out).value();
   r.err = ReadTextFile(err).value();
   return r;
+}
+
+bool KillWhen(const std::string& binary, const std::vector<std::string>& args, const fs::path& log,
+              const std::function<bool()>& ready, double timeout_s) {
+  std::vector<std::string> storage = args;
+  storage.insert(storage.begin(), binary);
+  std::vector<char*> argv;
+  for (auto& a : storage) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, binary.c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return false;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  int status = 0;
+  while (!ready() && std::chrono::steady_clock::now() < deadline) {
+    if (waitpid(pid, &status, WNOHANG) == pid) return false;  // finished by itself
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  kill(pid, SIGKILL);
+  if (waitpid(pid, &status, 0) != pid) return false;
+  return WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
 }
 
 }  // namespace reflcap::testing

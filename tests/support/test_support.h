@@ -4,6 +4,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace reflcap::testing {
 
@@ -49,5 +50,13 @@ struct CliResult {
 
 // Runs `binary args` through the shell with stdout and stderr captured in files under `dir`.
 CliResult RunCommand(const std::string& binary, const std::string& args, const ScratchDir& dir);
+
+// Starts `binary args...` (no shell; stdout and stderr to `log`), polls `ready` every 2 ms and
+// sends SIGKILL as soon as it is true (or after `timeout_s`), then reaps the process. True when
+// the process died of that SIGKILL; false when it had exited by itself first (the test then
+// did not interrupt anything) or could not be started.
+bool KillWhen(const std::string& binary, const std::vector<std::string>& args,
+              const std::filesystem::path& log, const std::function<bool()>& ready,
+              double timeout_s = 60);
 
 }  // namespace reflcap::testing

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -162,6 +163,58 @@ TEST(ResampleCli, AnUnreadablePhotographLeavesNothingBehind) {
   EXPECT_NE(r.err.find("capture.json"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir / "samples"));
   EXPECT_TRUE(Leftovers(dir.path()).empty());
+}
+
+TEST(ResampleCli, ResumeAfterSigkillGivesTheUninterruptedStore) {
+  testing::ScratchDir dir;
+  // ~64 train photographs of a small capture, a checkpoint after every one: the kill lands
+  // between checkpoints, after at least three.
+  CliResult r = RunCli("synth --quiet --out " + (dir / "cap").string() +
+                           " --texels 1500 --image-size 64 --cameras 2 --lights 3 --steps 16",
+                       dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string capture = (dir / "cap").string();
+  const std::string common = " --quiet --chunk-texels 300";
+  r = RunCli("resample " + capture + " --out " + (dir / "whole").string() + common + " --no-checkpoint", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+
+  const fs::path out = dir / "killed", checkpoint = dir / "killed.checkpoint";
+  auto images_done = [&]() -> int {
+    auto text = ReadTextFile(checkpoint / "checkpoint.json");
+    if (!text.ok()) return 0;
+    const nlohmann::json state = nlohmann::json::parse(*text, nullptr, false);
+    return state.is_object() ? state.value("images_done", 0) : 0;
+  };
+  ASSERT_TRUE(testing::KillWhen(REFLCAP_BINARY,
+                                {"resample", capture, "--out", out.string(), "--quiet",
+                                 "--chunk-texels", "300", "--checkpoint-seconds", "0"},
+                                dir / "killed.log", [&] { return images_done() >= 3; }))
+      << "the resample finished before it could be killed";
+  EXPECT_FALSE(fs::exists(out));
+  const int done = images_done();
+  EXPECT_GE(done, 3);
+
+  // Refused without --resume, and with options that change the samples.
+  r = RunCli("resample " + capture + " --out " + out.string() + common, dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--resume"), std::string::npos) << r.err;
+  r = RunCli("resample " + capture + " --out " + out.string() + common + " --min-cos 0.2 --resume", dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("identity.min_cos"), std::string::npos) << r.err;
+
+  r = RunCli("resample " + capture + " --out " + out.string() + " --chunk-texels 300 --resume", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("resumed after " + std::to_string(done)), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(checkpoint));
+  // Every file of the store and the maps, byte for byte (the report differs in its timings).
+  int compared = 0;
+  for (const auto& e : fs::directory_iterator(dir / "whole")) {
+    const std::string name = e.path().filename().string();
+    if (name == "resample_report.json") continue;
+    EXPECT_EQ(ReadTextFile(e.path()).value(), ReadTextFile(out / name).value()) << name;
+    ++compared;
+  }
+  EXPECT_GE(compared, 10);  // store.json, atlas.bin, 5 chunks, 3 maps
 }
 
 }  // namespace

@@ -3,15 +3,6 @@
 // uninterrupted run's, and parts or checkpoints of another run must be refused with nothing
 // written. Also the chunk result file format (fit_checkpoint.h) on its own.
 #include <gtest/gtest.h>
-#include <fcntl.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <chrono>
-#include <cstdlib>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -21,8 +12,6 @@
 #include "engine/fit/synthetic_samples.h"
 #include "engine/texel/sample_store.h"
 #include "tests/support/test_support.h"
-
-extern char** environ;
 
 namespace reflcap::fit {
 namespace {
@@ -39,21 +28,10 @@ constexpr uint32_t kChunkTexels = 192;
 // Every 29th texel has no sample (albedo fill's work), every 7th of the rest only its first half.
 constexpr uint32_t kUnseenEvery = 29;
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out, err;
-};
+using reflcap::testing::CliResult;
 
 CliResult RunCli(const std::string& args, const ScratchDir& dir) {
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command =
-      std::string(REFLCAP_BINARY) + " " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(command.c_str());
-  CliResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadTextFile(out).value();
-  r.err = ReadTextFile(err).value();
-  return r;
+  return reflcap::testing::RunCommand(REFLCAP_BINARY, args, dir);
 }
 
 void WriteStore(const fs::path& dir) {
@@ -191,23 +169,6 @@ TEST_F(FitShardCli, MergeRefusesPartsThatDoNotBelongTogether) {
   EXPECT_EQ(RunCli("merge --out " + out.string(), dir_).exit_code, 1);
 }
 
-// Starts the executable with `args` (no shell), returns its pid.
-pid_t Spawn(const std::vector<std::string>& args, const fs::path& log) {
-  std::vector<char*> argv;
-  std::vector<std::string> storage = args;
-  storage.insert(storage.begin(), REFLCAP_BINARY);
-  for (auto& a : storage) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  pid_t pid = -1;
-  const int rc = posix_spawn(&pid, REFLCAP_BINARY, &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  return rc == 0 ? pid : -1;
-}
-
 TEST_F(FitShardCli, ResumeAfterSigkillEqualsAnUninterruptedRun) {
   // The Ceres reference backend is slow enough (~0.1 s per chunk) that the kill lands between
   // chunks; one thread keeps the chunk order and the timing steady.
@@ -216,19 +177,11 @@ TEST_F(FitShardCli, ResumeAfterSigkillEqualsAnUninterruptedRun) {
   ASSERT_EQ(whole.exit_code, 0) << whole.err;
 
   const fs::path out = dir_ / "killed", checkpoint = dir_ / "killed.checkpoint";
-  const pid_t pid = Spawn({"fit", samples_, "--out", out.string(), "--backend", "ceres",
-                           "--threads", "1", "--quiet"},
-                          dir_ / "killed.log");
-  ASSERT_GT(pid, 0);
-  // Kill as soon as the second chunk's results are on disk (poll every 2 ms; 30 s at most).
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (!fs::exists(checkpoint / FitChunkFileName(1)) && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  }
-  ASSERT_EQ(kill(pid, SIGKILL), 0);
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)
+  // Kill as soon as the second chunk's results are on disk.
+  ASSERT_TRUE(reflcap::testing::KillWhen(
+      REFLCAP_BINARY,
+      {"fit", samples_, "--out", out.string(), "--backend", "ceres", "--threads", "1", "--quiet"},
+      dir_ / "killed.log", [&] { return fs::exists(checkpoint / FitChunkFileName(1)); }))
       << "the fit finished before it could be killed";
   EXPECT_FALSE(fs::exists(out));  // no half-written output
   int done = 0;
