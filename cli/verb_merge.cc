@@ -7,6 +7,8 @@
 
 #include "cli/cli.h"
 #include "engine/core/progress.h"
+#include "acquire/resample/resample.h"
+#include "engine/core/atomic_file.h"
 #include "engine/fit/fit_driver.h"
 
 namespace reflcap::cli {
@@ -19,12 +21,17 @@ int RunMerge(int argc, char** argv) {
   bool overwrite = false;
   ArgParser args(
       "merge", "PARTS... --out DIR [--samples SAMPLES] [--threads N] [--overwrite]",
-      "Join the parts written by `reflcap fit --shard I/N` (one per shard, N in all) into the\n"
-      "FIT folder a single run writes: the parts must be of one sample store (its fingerprint),\n"
-      "one set of options and backend, each shard exactly once. The merge then runs the stages\n"
-      "that need the whole atlas (lobe transfer, albedo fill, material clusters) and writes the\n"
-      "maps: params.exr, sigma.exr and status.exr bit-identical to a single run's. Nothing is\n"
-      "written when a part is missing, duplicated, corrupt or of another run.");
+      "Join the parts written by `reflcap resample --shard I/N` or `reflcap fit --shard I/N`\n"
+      "(one per shard, N in all) into the folder a single run writes.\n"
+      "Resample parts (a shard = the photographs of a range of views) must be of one capture and\n"
+      "one set of options; every texel takes the parts' samples in shard order: the store and\n"
+      "maps are bit-identical to a single run's.\n"
+      "Fit parts (a shard = a range of chunks) must be of one sample store (its fingerprint), one\n"
+      "set of options and backend; the merge runs the stages that need the whole atlas (lobe\n"
+      "transfer, albedo fill, material clusters) and writes params.exr, sigma.exr and status.exr\n"
+      "bit-identical to a single run's.\n"
+      "Each shard exactly once; nothing is written when a part is missing, duplicated, corrupt or\n"
+      "of another run.");
   args.AddPositionalList("PARTS", &part_names, "the part folders (any order)");
   args.AddString("out", &out, "DIR", "output folder (must not exist or be empty)");
   args.AddString("samples", &samples, "SAMPLES",
@@ -64,9 +71,20 @@ int RunMerge(int argc, char** argv) {
                 FormatDuration(summary->total_seconds).c_str());
     return 0;
   }
+  if (fs::exists(parts.front() / "resample_part.json", ec)) {
+    auto staging = StagingDir::Create(out, overwrite);
+    if (!staging.ok()) return ReportError("merge", staging.status());
+    auto summary = resample::MergeResampleParts(parts, staging->path());
+    if (!summary.ok()) return ReportError("merge", summary.status());
+    if (Status s = staging->Commit(); !s.ok()) return ReportError("merge", s);
+    std::printf("merged %zu resample parts into %s\n%s", parts.size(), out.c_str(),
+                summary->text.c_str());
+    return 0;
+  }
   return ReportError("merge", NotFoundError(parts.front().string(),
                                             ": not a part (no ", fit::kFitPartFile,
-                                            "): parts are what `reflcap fit --shard I/N` writes"));
+                                            " or resample_part.json): parts are what `reflcap "
+                                            "resample|fit --shard I/N` write"));
 }
 
 }  // namespace reflcap::cli

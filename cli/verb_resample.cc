@@ -68,6 +68,10 @@ int RunResample(int argc, char** argv) {
               StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,
                      "); the unit `fit --shard` divides and `fit --resume` checkpoints"));
   bool no_checkpoint = false;
+  std::string shard_text;
+  args.AddString("shard", &shard_text, "I/N",
+                 "resample only shard I of N (the photographs of a contiguous range of views) and "
+                 "write a part to SAMPLES for reflcap merge (default: every photograph)");
   args.AddFlag("resume", &options.resume,
                "continue an interrupted resample from SAMPLES.checkpoint (same capture and options)");
   args.AddDouble("checkpoint-seconds", &options.checkpoint_seconds,
@@ -110,6 +114,14 @@ int RunResample(int argc, char** argv) {
     return kExitUsage;
   }
   options.chunk_texels = uint32_t(chunk_texels);
+  if (!shard_text.empty()) {
+    auto shard = ParseShard(shard_text);
+    if (!shard.ok()) {
+      std::fprintf(stderr, "reflcap resample: %s\n", shard.status().message().c_str());
+      return kExitUsage;
+    }
+    options.shard = *shard;
+  }
   if (options.resume && no_checkpoint) {
     std::fprintf(stderr, "reflcap resample: --resume and --no-checkpoint exclude each other\n");
     return kExitUsage;

@@ -15,6 +15,7 @@
 #include "acquire/resample/coverage.h"
 #include "acquire/resample/image_resampler.h"
 #include "acquire/resample/mask_agreement.h"
+#include "acquire/resample/resample_outputs.h"
 #include "acquire/resample/vulkan_masks.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
@@ -42,32 +43,6 @@ double Seconds(Clock::time_point since) {
 
 // Largest atlas side accepted (as `reflcap info`): 16384² texel slots.
 constexpr int kMaxAtlasResolution = 16384;
-// The sample-count thresholds reported as "fraction of seen texels with at least N samples".
-constexpr int kSampleThresholds[] = {1, 5, 10, 20, 50};
-// Half-vector angles (degrees) below which a texel counts as having seen a near-specular
-// configuration: 2° resolves lobes up to n ~ 200, 5° up to n ~ 30, 10° only broad ones
-// (a lobe of exponent n is ~ 1/sqrt(n) rad wide around the mirror direction, θh half that).
-constexpr double kNearSpecularDeg[] = {2, 5, 10};
-// Near-specular threshold used in the per-views table.
-constexpr double kNearSpecularTableDeg = 5;
-
-// Nearest-rank percentile of an ascending vector (q in [0, 1]); 0 when empty.
-double Percentile(const std::vector<double>& sorted, double q) {
-  if (sorted.empty()) return 0;
-  const size_t rank = size_t(std::ceil(q * double(sorted.size())));
-  return sorted[std::min(sorted.size() - 1, rank == 0 ? 0 : rank - 1)];
-}
-
-Json Distribution(std::vector<double> values) {
-  std::sort(values.begin(), values.end());
-  const double sum = std::accumulate(values.begin(), values.end(), 0.0);
-  return {{"p5", Percentile(values, 0.05)},
-          {"p50", Percentile(values, 0.50)},
-          {"p95", Percentile(values, 0.95)},
-          {"mean", values.empty() ? 0.0 : sum / double(values.size())},
-          {"max", values.empty() ? 0.0 : values.back()}};
-}
-
 struct NoiseChoice {
   NoiseModel model;
   double saturation = 0;  // ground_truth.noise.saturation, 0 when absent
@@ -145,23 +120,6 @@ bool Selected(const CaptureImage& image, SplitSelection split) {
   return false;
 }
 
-Image CoveragePng(const TexelAtlas& atlas, const TexelCoverage& coverage) {
-  Image png(atlas.width, atlas.height, 3, 0.0f);
-  const double scale = 1.0 / std::log2(1 + kCoveragePngFullScale);
-  for (size_t t = 0; t < atlas.TexelCount(); ++t) {
-    float* px = &png.data[size_t(atlas.pixel_of_texel[t]) * 3];
-    const uint32_t n = coverage.samples(t);
-    if (n == 0) {
-      px[0] = 160.0f / 255.0f;
-      continue;
-    }
-    const float grey = float(std::min(1.0, std::log2(1.0 + n) * scale));
-    px[0] = px[1] = px[2] = grey;
-  }
-  return png;
-}
-
-
 // ---- Checkpoints (ResampleOptions::checkpoint_dir) --------------------------------------------
 constexpr const char* kCheckpointFormat = "reflcap-resample-checkpoint/1";
 constexpr const char* kCheckpointFile = "checkpoint.json";
@@ -189,49 +147,6 @@ Json CheckpointIdentity(const Capture& capture, const ResampleOptions& options,
               {"images", images.size()},
               {"images_crc32", Crc32(images.data(), images.size() * sizeof(uint32_t))}};
 }
-
-// The first key whose value differs ("" when none).
-std::string FirstDifference(const Json& a, const Json& b) {
-  for (auto it = a.begin(); it != a.end(); ++it) {
-    if (!b.contains(it.key()) || b[it.key()] != it.value()) return it.key();
-  }
-  return a.size() == b.size() ? "" : "(keys)";
-}
-
-// The counters a run sums over its photographs, saved with a checkpoint.
-struct Tally {
-  std::array<uint64_t, kOutcomeCount> outcome_counts{};
-  uint64_t primary_rays = 0, tap_shadow_rays = 0, visibility_rays = 0, shadow_rays = 0;
-  uint64_t variance_images = 0;
-  double read_wait_s = 0, resample_s = 0, stream_s = 0, gpu_s = 0;
-
-  Json ToJson() const {
-    return Json{{"outcome_counts", outcome_counts},
-                {"rays", {primary_rays, tap_shadow_rays, visibility_rays, shadow_rays}},
-                {"variance_images", variance_images},
-                {"seconds", {read_wait_s, resample_s, stream_s, gpu_s}}};
-  }
-  // False when a field is missing or mistyped.
-  bool FromJson(const Json& j) {
-    try {
-      outcome_counts = j.at("outcome_counts").get<std::array<uint64_t, kOutcomeCount>>();
-      const auto rays = j.at("rays").get<std::array<uint64_t, 4>>();
-      primary_rays = rays[0];
-      tap_shadow_rays = rays[1];
-      visibility_rays = rays[2];
-      shadow_rays = rays[3];
-      variance_images = j.at("variance_images").get<uint64_t>();
-      const auto seconds = j.at("seconds").get<std::array<double, 4>>();
-      read_wait_s = seconds[0];
-      resample_s = seconds[1];
-      stream_s = seconds[2];
-      gpu_s = seconds[3];
-    } catch (const Json::exception&) {
-      return false;
-    }
-    return true;
-  }
-};
 
 }  // namespace
 
@@ -284,6 +199,10 @@ Status ResampleOptions::Validate() const {
   if (threads < 0) return InvalidArgumentError("threads must be >= 0");
   if (!(checkpoint_seconds >= 0) || !std::isfinite(checkpoint_seconds)) {
     return InvalidArgumentError("--checkpoint-seconds: must be >= 0, got ", checkpoint_seconds);
+  }
+  if (shard.count > 1 && cross_check) {
+    return InvalidArgumentError("--cross-check and --shard exclude each other (the agreement "
+                                "statistics are not merged)");
   }
   if (cross_check && backend != Backend::kVulkan) {
     return InvalidArgumentError("--cross-check compares the Vulkan masks with Embree: it needs "
@@ -428,6 +347,19 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   std::stable_sort(order.begin(), order.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
+  // A shard keeps the photographs of its views (contiguous in `order`, which is grouped by view).
+  const std::vector<std::pair<int, uint32_t>> all_order = order;
+  const uint32_t views_total = uint32_t(view_ids.size());
+  const bool sharded = options.shard.count > 1;
+  ItemRange view_range{0, views_total};
+  if (sharded) {
+    REFLCAP_ASSIGN_OR_RETURN(view_range,
+                             ShardRange(options.shard, views_total, "views (camera x turntable poses)"));
+    order.clear();
+    for (const auto& o : all_order) {
+      if (uint32_t(o.first) >= view_range.begin && uint32_t(o.first) < view_range.end) order.push_back(o);
+    }
+  }
   const double setup_s = Seconds(start);
 
   // ---- Checkpoint: start one, or continue from one ----------------------------------------------
@@ -438,10 +370,13 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   const fs::path checkpoint_dir = options.checkpoint_dir;
   const fs::path spill_dir = checkpointing ? checkpoint_dir / "spill" : out_dir / ".spill";
-  Json identity;
+  // What this run is of: the same for every shard of a run (the merge compares them); a
+  // checkpoint also names its shard.
+  const Json identity = CheckpointIdentity(capture, options, atlas, noise, all_order);
+  Json checkpoint_identity = identity;
+  checkpoint_identity["shard"] = {options.shard.index, options.shard.count};
   std::optional<Json> resume_state;
   if (checkpointing) {
-    identity = CheckpointIdentity(capture, options, atlas, noise, order);
     std::error_code ec;
     if (fs::exists(checkpoint_dir, ec)) {
       if (!options.resume) {
@@ -458,7 +393,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
             !state.contains("identity")) {
           return DataLossError(state_file.string(), ": not a resample checkpoint");
         }
-        const std::string differs = FirstDifference(identity, state["identity"]);
+        const std::string differs = FirstDifference(checkpoint_identity, state["identity"]);
         if (!differs.empty()) {
           return FailedPreconditionError(state_file.string(), ": identity.", differs,
                                          " differs from this run: the checkpoint belongs to another "
@@ -531,7 +466,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     const std::string coverage_file = StrCat("coverage_", images_done, ".bin");
     REFLCAP_RETURN_IF_ERROR(coverage.Save(checkpoint_dir / coverage_file));
     const Json state = {{"format", kCheckpointFormat},
-                        {"identity", identity},
+                        {"identity", checkpoint_identity},
                         {"images_done", images_done},
                         {"spill_records", records},
                         {"coverage_file", coverage_file},
@@ -545,6 +480,12 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     last_coverage_file = coverage_file;
     return OkStatus();
   };
+  tally.ignored_variance_images = 0;  // selected photographs whose variance is not used
+  if (!options.use_variance) {
+    for (const auto& entry : order) {
+      tally.ignored_variance_images += !capture.images[entry.second].variance.empty();
+    }
+  }
   auto last_checkpoint = Clock::now();
   std::array<uint64_t, kOutcomeCount>& outcome_counts = tally.outcome_counts;
   uint64_t& primary_rays = tally.primary_rays;
@@ -652,119 +593,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   info.geometry = normal_map ? "normal_map" : "mesh";
   REFLCAP_RETURN_IF_ERROR(WriteSampleStoreInfo(out_dir, info));
 
-  Image samples_map(atlas.width, atlas.height, 1, 0.0f);
-  // domain.exr channels, in OpenEXR's (alphabetical) order.
-  const std::vector<std::string> domain_names = {"cells", "min_half_angle_deg", "observations",
-                                                 "samples", "seen", "views"};
-  Image domain_map(atlas.width, atlas.height, int(domain_names.size()), 0.0f);
-  std::vector<double> samples_seen, cells_seen, views_seen, observations_seen;
-  uint64_t texels_seen = 0, texels_with_samples = 0, texels_observed = 0, observations = 0;
-  std::array<uint64_t, std::size(kSampleThresholds)> at_least{}, observed_at_least{},
-      observed_and_kept{};
-  std::array<uint64_t, std::size(kNearSpecularDeg)> near_specular{};
-  // Texels grouped by their number of views: 0, 1, 2, 3-4, 5-8, 9-16, 17+.
-  constexpr int kViewGroups = 7;
-  const char* kViewGroupNames[kViewGroups] = {"0", "1", "2", "3-4", "5-8", "9-16", "17+"};
-  auto view_group = [](uint32_t v) {
-    if (v <= 2) return int(v);
-    if (v <= 4) return 3;
-    if (v <= 8) return 4;
-    if (v <= 16) return 5;
-    return 6;
-  };
-  struct Group {
-    uint64_t texels = 0;
-    double samples = 0, cells = 0;
-    uint64_t near_specular = 0;
-  };
-  std::array<Group, kViewGroups> groups{};
-  for (size_t t = 0; t < texels; ++t) {
-    const size_t pixel = atlas.pixel_of_texel[t];
-    const uint32_t n = coverage.samples(t);
-    samples_map.data[pixel] = float(n);
-    float* d = &domain_map.data[pixel * domain_names.size()];
-    const uint32_t o = coverage.observations(t);
-    d[0] = float(coverage.cells(t));
-    d[1] = coverage.min_half_angle_deg(t);
-    d[2] = float(o);
-    d[3] = float(n);
-    d[4] = coverage.seen(t) ? 1.0f : 0.0f;
-    d[5] = float(coverage.views(t));
-    texels_with_samples += n > 0;
-    texels_observed += o > 0;
-    observations += o;
-    if (!coverage.seen(t)) continue;
-    ++texels_seen;
-    samples_seen.push_back(n);
-    observations_seen.push_back(o);
-    cells_seen.push_back(coverage.cells(t));
-    views_seen.push_back(coverage.views(t));
-    for (size_t i = 0; i < std::size(kSampleThresholds); ++i) {
-      const uint32_t threshold = uint32_t(kSampleThresholds[i]);
-      at_least[i] += n >= threshold;
-      observed_at_least[i] += o >= threshold;
-      observed_and_kept[i] += o >= threshold && n >= threshold;
-    }
-    for (size_t i = 0; i < std::size(kNearSpecularDeg); ++i) {
-      near_specular[i] += coverage.min_half_angle_deg(t) < kNearSpecularDeg[i];
-    }
-    Group& g = groups[view_group(coverage.views(t))];
-    ++g.texels;
-    g.samples += n;
-    g.cells += coverage.cells(t);
-    g.near_specular += coverage.min_half_angle_deg(t) < kNearSpecularTableDeg;
-  }
-  REFLCAP_RETURN_IF_ERROR(WriteExr(out_dir / "coverage.exr", samples_map));
-  REFLCAP_RETURN_IF_ERROR(WriteExrChannels(out_dir / "domain.exr", domain_map, domain_names));
-  REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "coverage.png", CoveragePng(atlas, coverage)));
-
-  uint64_t kept = outcome_counts[size_t(Outcome::kKept)];
-  std::array<uint64_t, kReasonCount> reasons{};
-  Json detail = Json::object();
-  for (int o = 1; o < kOutcomeCount; ++o) {
-    reasons[size_t(ReasonOf(Outcome(o)))] += outcome_counts[o];
-    detail[OutcomeName(Outcome(o))] = outcome_counts[o];
-  }
-  Json rejected = Json::object();
-  uint64_t rejected_total = 0;
-  for (int r = 0; r < kReasonCount; ++r) {
-    rejected[ReasonName(Reason(r))] = reasons[r];
-    rejected_total += reasons[r];
-  }
-  REFLCAP_CHECK(kept == writer->samples()) << kept << " kept vs " << writer->samples() << " written";
-  const double fraction_base = texels_seen > 0 ? double(texels_seen) : 1.0;
-  Json at_least_json = Json::object(), observed_json = Json::object(), keep_json = Json::object();
-  for (size_t i = 0; i < std::size(kSampleThresholds); ++i) {
-    const std::string key = std::to_string(kSampleThresholds[i]);
-    at_least_json[key] = double(at_least[i]) / fraction_base;
-    observed_json[key] = double(observed_at_least[i]) / fraction_base;
-    keep_json[key] = {{"texels_observed_at_least", observed_at_least[i]},
-                      {"fraction_keeping_at_least",
-                       observed_at_least[i] ? double(observed_and_kept[i]) / double(observed_at_least[i]) : 0.0}};
-  }
-  Json near_json = Json::object();
-  for (size_t i = 0; i < std::size(kNearSpecularDeg); ++i) {
-    near_json[StrCat(kNearSpecularDeg[i])] = double(near_specular[i]) / fraction_base;
-  }
-  Json by_views = Json::array();
-  for (int g = 0; g < kViewGroups; ++g) {
-    const Group& group = groups[g];
-    const double n = group.texels > 0 ? double(group.texels) : 1.0;
-    by_views.push_back({{"views", kViewGroupNames[g]},
-                        {"texels", group.texels},
-                        {"mean_samples", group.samples / n},
-                        {"mean_cells", group.cells / n},
-                        {"mean_cells_fraction", group.cells / n / kDomainCells},
-                        {"near_specular_5deg_fraction", double(group.near_specular) / n}});
-  }
-  const uint64_t pairs = uint64_t(texels) * order.size();
   const double total_s = Seconds(start);
-  uint64_t ignored_variance_images = 0;  // selected photographs whose variance was not used
-  if (!options.use_variance) {
-    for (const auto& entry : order) {
-      ignored_variance_images += !capture.images[entry.second].variance.empty();
-    }
-  }
   Json report = {
       {"format", "reflcap-resample-report/1"},
       {"capture", info.capture},
@@ -797,74 +626,19 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                        {"relative_sigma_floor", kRelativeSigmaFloor},
                        {"dark_floor", noise.model.DarkFloor()},
                        {"invalid_below", noise.model.InvalidFloor()},
-                       {"source", noise.model.source},
-                       {"variance_images", variance_images},
-                       {"variance_images_ignored", ignored_variance_images},
-                       {"weights",
-                        variance_images == 0
-                            ? "the noise model for every photograph"
-                            : variance_images == order.size()
-                                  ? "every photograph's variance image (images[].variance): var = "
-                                    "sum_k w_k^2 var_k over the bilinear taps + (relative floor x "
-                                    "max channel)^2; dark: every channel <= 3 sigma; invalid: a "
-                                    "channel < -5 sigma"
-                                  : "the variance image (images[].variance) where a photograph "
-                                    "has one (see variance_images), the noise model elsewhere"}}},
+                       {"source", noise.model.source}}},
       {"atlas", {{"width", atlas.width}, {"height", atlas.height}, {"source", atlas_source}}},
-      {"images", order.size()},
       {"images_skipped", skipped},
-      {"views", view_ids.size()},
-      {"texels", texels},
-      {"texels_seen", texels_seen},
-      {"texels_with_samples", texels_with_samples},
-      {"pairs", pairs},
-      {"samples_kept", kept},
-      {"samples_rejected", rejected},
-      {"samples_rejected_total", rejected_total},
-      {"samples_rejected_detail", detail},
-      {"reason_order",
-       "each (texel, image) pair is counted once, under the first test it fails: grazing (view) > "
-       "edge (outside the image) > occluded > grazing (light) > shadowed > edge (footprint: "
-       "silhouette, depth or shadow boundary) > invalid > clipped > dark; kept + rejected = pairs"},
-      {"samples_per_texel", Distribution(samples_seen)},
-      {"samples_per_texel_population", "texels_seen (texels some selected camera sees: view not "
-                                       "grazing, inside the image, not occluded)"},
-      {"texels_seen_with_at_least_samples", at_least_json},
-      {"texels_observed", texels_observed},
-      {"observations", observations},
-      {"observations_kept_fraction", observations ? double(kept) / double(observations) : 0.0},
-      {"observations_definition",
-       "an observation is a (texel, image) pair that the photograph shows lit: seen, light not "
-       "grazing, not shadowed; only the footprint (edge) and pixel tests remain. Observations are "
-       "what the rig offers; samples are what the resampler keeps"},
-      {"observations_per_texel", Distribution(observations_seen)},
-      {"texels_seen_with_at_least_observations", observed_json},
-      {"keep_rate_by_threshold", keep_json},
-      {"domain",
-       {{"cells_total", kDomainCells},
-        {"binning", "unordered (theta_i, theta_o) pair in 15 deg bins over [0, 90) x relative "
-                    "azimuth in 30 deg bins over [0, 180]: 21 x 6 cells (reciprocity, isotropy)"},
-        {"cells_per_texel", Distribution(cells_seen)},
-        {"views_per_texel", Distribution(views_seen)},
-        {"near_specular_fraction", near_json},
-        {"near_specular_definition", "fraction of seen texels with a sample whose half vector is "
-                                     "within the given angle (deg) of the shading normal"},
-        {"by_views", by_views},
-        {"note", "more viewpoints give more distinct cells and more near-specular samples, which "
-                 "is what makes a lobe identifiable (the seed paper: more viewpoints, more "
-                 "accurate fits)"}}},
-      {"rays", {{"visibility", visibility_rays},
-                {"shadow", shadow_rays},
-                {"pixel_map_camera", primary_rays},
-                {"pixel_map_shadow", tap_shadow_rays}}},
+      {"views", view_range.end - view_range.begin},
       {"timings", {{"setup_s", setup_s},
                    {"read_wait_s", read_wait_s},
                    {"resample_s", resample_s},
                    {"stream_s", stream_s},
                    {"reorder_s", reorder_s},
-                   {"outputs_s", Seconds(t0)},
+                   {"outputs_s", 0.0},
                    {"total_s", total_s},
-                   {"texel_image_pairs_per_s", resample_s > 0 ? double(pairs) / resample_s : 0.0}}},
+                   {"texel_image_pairs_per_s",
+                    resample_s > 0 ? double(texels) * double(order.size()) / resample_s : 0.0}}},
       {"store", {{"chunks", info.chunks},
                  {"chunk_texels", info.chunk_texels},
                  {"spilled_bytes", spilled_bytes}}},
@@ -945,82 +719,38 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                 "a distance jump > ", kDepthJumpFootprints, " pixel footprints) or a shadow edge "
                 "lies within ", kNearEdgePixels, " camera-map texels of the texel's projection")}};
   }
+  REFLCAP_ASSIGN_OR_RETURN(Counted counted,
+                           WriteCountedOutputs(out_dir, atlas, coverage, tally, order.size(),
+                                               info.samples, &report));
+  report["timings"]["outputs_s"] = Seconds(t0);
+  report["timings"]["total_s"] = Seconds(start);
+  if (sharded) {
+    // The part: a store of this shard's photographs' samples, its coverage and what the merge
+    // needs to sum (resample_merge.cc).
+    REFLCAP_RETURN_IF_ERROR(coverage.Save(out_dir / kPartCoverageFile));
+    const Json part = {{"format", kResamplePartFormat},
+                       {"identity", identity},
+                       {"shard", {{"index", options.shard.index}, {"count", options.shard.count}}},
+                       {"views", {view_range.begin, view_range.end}},
+                       {"views_total", views_total},
+                       {"images_total", all_order.size()},
+                       {"tally", tally.ToJson()},
+                       {"report", report}};
+    REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / kResamplePartFile, part.dump(1) + "\n"));
+  }
   const std::string report_text = report.dump(2) + "\n";
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "resample_report.json", report_text));
 
   ResampleSummary summary;
   summary.texels = texels;
-  summary.texels_seen = texels_seen;
-  summary.texels_with_samples = texels_with_samples;
+  summary.texels_seen = counted.texels_seen;
+  summary.texels_with_samples = counted.texels_with_samples;
   summary.images = order.size();
-  summary.samples_kept = kept;
-  summary.samples_rejected = rejected_total;
+  summary.samples_kept = counted.kept;
+  summary.samples_rejected = counted.rejected_total;
   summary.seconds = Seconds(start);
   summary.report_json = report_text;
-  std::ostringstream text;
-  char line[256];
-  std::snprintf(line, sizeof line, "resampled %zu images x %zu texels (%s split, %s) in %s\n",
-                order.size(), texels, info.split.c_str(), info.geometry.c_str(),
-                FormatDuration(summary.seconds).c_str());
-  text << line;
-  std::snprintf(line, sizeof line, "  samples kept %llu (%.1f %% of %llu texel-image pairs); rejected:",
-                (unsigned long long)kept, pairs ? 100.0 * double(kept) / double(pairs) : 0.0,
-                (unsigned long long)pairs);
-  text << line;
-  for (int r = 0; r < kReasonCount; ++r) text << " " << ReasonName(Reason(r)) << " " << reasons[r];
-  text << "\n";
-  const Json& spt = report["samples_per_texel"];
-  std::snprintf(line, sizeof line,
-                "  texels seen %llu, with samples %llu; samples per seen texel p5 %.0f, p50 %.0f, "
-                "p95 %.0f; >= 20 samples: %.1f %% (>= 20 lit observations: %.1f %%)\n",
-                (unsigned long long)texels_seen, (unsigned long long)texels_with_samples,
-                spt["p5"].get<double>(), spt["p50"].get<double>(), spt["p95"].get<double>(),
-                100.0 * at_least_json["20"].get<double>(), 100.0 * observed_json["20"].get<double>());
-  text << line;
-  const Json& domain = report["domain"];
-  std::snprintf(line, sizeof line,
-                "  coverage: %.0f views and %.0f of %d domain cells per seen texel (median); "
-                "near-specular sample (half vector < 5 deg): %.1f %% of seen texels\n",
-                domain["views_per_texel"]["p50"].get<double>(),
-                domain["cells_per_texel"]["p50"].get<double>(), kDomainCells,
-                100.0 * near_json["5"].get<double>());
-  text << line;
-  if (variance_images > 0 || ignored_variance_images > 0) {
-    std::snprintf(line, sizeof line,
-                  "  weights: per-pixel variance (images[].variance) for %llu of %zu images%s%s\n",
-                  (unsigned long long)variance_images, order.size(),
-                  variance_images < order.size() ? ", noise model for the rest" : "",
-                  ignored_variance_images > 0
-                      ? " (the capture has variance images; --variance-weights uses them)"
-                      : "");
-    text << line;
-  }
-  if (height_field != nullptr) {
-    std::snprintf(line, sizeof line,
-                  "  cast shadows from the normal map's height field: %llu samples shadowed "
-                  "(integration residual rms %.2f px, heights %.0f..%.0f px)\n",
-                  (unsigned long long)reasons[int(Reason::kShadowed)],
-                  height_field->stats.rms_residual_px, height_field->stats.min_height_px,
-                  height_field->stats.max_height_px);
-    text << line;
-  } else if (normal_map) {
-    text << "  cast shadows: not tested (height field " << height_field_note << ")\n";
-  }
-  if (masks != nullptr) {
-    std::snprintf(line, sizeof line, "  backend vulkan on %s (light map: %s, %d px)\n",
-                  device.c_str(), mask_stats.light_map.c_str(), mask_stats.light_resolution);
-    text << line;
-  }
-  if (cross_check) {
-    std::snprintf(line, sizeof line,
-                  "  mask agreement with Embree: %.3f %% of %llu pairs; %llu disagreements, "
-                  "%llu of them within %d px of a depth or shadow edge\n",
-                  100.0 * agreement.AgreeingFraction(), (unsigned long long)agreement.pairs,
-                  (unsigned long long)agreement.disagreeing(),
-                  (unsigned long long)agreement.near_edge, kNearEdgePixels);
-    text << line;
-  }
-  summary.text = text.str();
+  summary.text = SummaryText(report, summary.seconds);
   return summary;
 }
 

@@ -30,8 +30,10 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "engine/capture/capture.h"
+#include "engine/core/shard.h"
 #include "engine/core/status.h"
 
 namespace reflcap::resample {
@@ -118,6 +120,11 @@ struct ResampleOptions {
   // (`resume` without a folder does nothing). Not
   // with cross_check (its agreement statistics are not checkpointed): no checkpoints then.
   std::filesystem::path checkpoint_dir;
+  // Shard `shard.index` of `shard.count` (`--shard I/N`): only the photographs of a contiguous
+  // range of views (camera x turntable poses, in the order the run processes them), written as a
+  // part (a store of their samples, coverage.bin, resample_part.json) for MergeResampleParts.
+  // Not with cross_check.
+  Shard shard;
   bool resume = false;
   double checkpoint_seconds = kDefaultCheckpointSeconds;
   size_t spill_buffer_bytes = kDefaultSpillBufferBytes;
@@ -151,5 +158,15 @@ StatusOr<ResampleSummary> ResampleCapture(const std::filesystem::path& capture_p
 // The same for a capture already read and checked with ReadCapture and ValidateCaptureFiles.
 StatusOr<ResampleSummary> ResampleCapture(const Capture& capture, const ResampleOptions& options,
                                           const std::filesystem::path& out_dir);
+
+// `reflcap merge` of resample parts: checks that `parts` are the shards 0..N-1 of one resample
+// (the same capture bytes, options, atlas and photographs; each shard once; their views tiling
+// the run's), then writes into `out_dir` (which must exist: the caller stages it) the store,
+// maps and report one run writes: every chunk's texels take the parts' samples in shard order,
+// so chunks, store.json, atlas.bin and the maps are bit-identical to a single run's (the report
+// differs in timings and says `shards`). FailedPrecondition naming the part and field for parts
+// that do not belong together; NotFound/DataLoss naming a missing or corrupt file.
+StatusOr<ResampleSummary> MergeResampleParts(const std::vector<std::filesystem::path>& parts,
+                                             const std::filesystem::path& out_dir);
 
 }  // namespace reflcap::resample

@@ -651,6 +651,12 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Fitter> fitter,
                            CreateFitter(backend, options.threads, vulkan));
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
+  std::error_code ec;
+  if (fs::exists(samples / "resample_part.json", ec)) {
+    // A resample shard's store holds only its views' samples: fitting it alone would be wrong.
+    return FailedPreconditionError(samples.string(), ": is one part of a sharded resample "
+                                   "(resample_part.json): join the parts with reflcap merge first");
+  }
   const SampleStoreInfo& info = store->info();
   REFLCAP_ASSIGN_OR_RETURN(TexelAtlas atlas, StoreAtlas(samples, info));
   const bool sharded = control.shard.count > 1;
@@ -691,7 +697,6 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   fitter.reset();
   ReleaseFreeHeap();
 
-  std::error_code ec;
   if (sharded) {
     // The part: the checkpoint's chunk result files and the manifest with what this shard did.
     pass.cached = {};

@@ -217,5 +217,70 @@ TEST(ResampleCli, ResumeAfterSigkillGivesTheUninterruptedStore) {
   EXPECT_GE(compared, 10);  // store.json, atlas.bin, 5 chunks, 3 maps
 }
 
+TEST(ResampleCli, MergedShardsEqualOneRunAndForeignPartsAreRefused) {
+  testing::ScratchDir dir;
+  const std::string capture = TinyCapture().string();
+  const std::string common = " --quiet --chunk-texels 400";
+  CliResult r = RunCli("resample " + capture + " --out " + (dir / "whole").string() + common, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // The tiny capture has 2 cameras x 4 steps = 8 views: 3 shards of 2-3 views.
+  std::string p[3];
+  for (int i : {2, 0, 1}) {
+    p[i] = (dir / ("part" + std::to_string(i))).string();
+    r = RunCli("resample " + capture + " --out " + p[i] + common + " --shard " + std::to_string(i) + "/3", dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  // A part alone is not a store to fit.
+  r = RunCli("fit " + p[0] + " --out " + (dir / "fit").string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("reflcap merge"), std::string::npos) << r.err;
+
+  const fs::path merged = dir / "merged";
+  r = RunCli("merge " + p[1] + " " + p[2] + " " + p[0] + " --out " + merged.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  int compared = 0;
+  for (const auto& e : fs::directory_iterator(dir / "whole")) {
+    const std::string name = e.path().filename().string();
+    if (name == "resample_report.json") continue;
+    EXPECT_EQ(ReadTextFile(e.path()).value(), ReadTextFile(merged / name).value()) << name;
+    ++compared;
+  }
+  EXPECT_GE(compared, 9);  // store.json, atlas.bin, 4 chunks, 3 maps
+  const nlohmann::json whole = nlohmann::json::parse(ReadTextFile(dir / "whole/resample_report.json").value());
+  const nlohmann::json joined = nlohmann::json::parse(ReadTextFile(merged / "resample_report.json").value());
+  for (const char* key : {"samples_kept", "samples_rejected", "samples_per_texel", "domain", "images",
+                          "views", "texels_seen", "observations"}) {
+    EXPECT_EQ(whole[key], joined[key]) << key;
+  }
+  EXPECT_EQ(joined["shards"]["count"], 3);
+
+  // Parts that do not belong together: nothing is written.
+  const std::string other = (dir / "other").string();
+  r = RunCli("resample " + capture + " --out " + other + common + " --shard 2/3 --min-cos 0.3", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  struct Case {
+    std::string parts, message;
+  };
+  const std::vector<Case> cases = {{p[0] + " " + p[1], "shard 2 is missing"},
+                                   {p[0] + " " + p[1] + " " + p[1], "shard 1 is also"},
+                                   {p[0] + " " + p[1] + " " + other, "identity.min_cos"}};
+  const fs::path out = dir / "refused";
+  for (const Case& c : cases) {
+    r = RunCli("merge " + c.parts + " --out " + out.string(), dir);
+    EXPECT_EQ(r.exit_code, 2) << c.parts;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+  }
+  // A corrupt coverage file is named.
+  std::string bytes = ReadTextFile(fs::path(p[2]) / "coverage.bin").value();
+  bytes[bytes.size() / 2] ^= 0x10;
+  testing::WriteText(fs::path(p[2]) / "coverage.bin", bytes);
+  r = RunCli("merge " + p[0] + " " + p[1] + " " + p[2] + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("coverage.bin"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_TRUE(Leftovers(dir.path()).empty());
+}
+
 }  // namespace
 }  // namespace reflcap
