@@ -10,6 +10,7 @@
 #include "acquire/resample/resample.h"
 #include "engine/core/atomic_file.h"
 #include "engine/fit/fit_driver.h"
+#include "render/reference/render_capture.h"
 
 namespace reflcap::cli {
 namespace fs = std::filesystem;
@@ -21,7 +22,7 @@ int RunMerge(int argc, char** argv) {
   bool overwrite = false;
   ArgParser args(
       "merge", "PARTS... --out DIR [--samples SAMPLES] [--threads N] [--overwrite]",
-      "Join the parts written by `reflcap resample --shard I/N` or `reflcap fit --shard I/N`\n"
+      "Join the parts written by `reflcap resample|fit|render --shard I/N`\n"
       "(one per shard, N in all) into the folder a single run writes.\n"
       "Resample parts (a shard = the photographs of a range of views) must be of one capture and\n"
       "one set of options; every texel takes the parts' samples in shard order: the store and\n"
@@ -30,6 +31,8 @@ int RunMerge(int argc, char** argv) {
       "set of options and backend; the merge runs the stages that need the whole atlas (lobe\n"
       "transfer, albedo fill, material clusters) and writes params.exr, sigma.exr and status.exr\n"
       "bit-identical to a single run's.\n"
+      "Render parts (a shard = a range of the selected photographs) must be of one capture,\n"
+      "fit and options; their files are copied and one render_report.json lists them all.\n"
       "Each shard exactly once; nothing is written when a part is missing, duplicated, corrupt or\n"
       "of another run.");
   args.AddPositionalList("PARTS", &part_names, "the part folders (any order)");
@@ -81,10 +84,21 @@ int RunMerge(int argc, char** argv) {
                 summary->text.c_str());
     return 0;
   }
+  if (fs::exists(parts.front() / "render_report.json", ec)) {
+    auto staging = StagingDir::Create(out, overwrite);
+    if (!staging.ok()) return ReportError("merge", staging.status());
+    if (Status s = render::MergeRenderParts(parts, staging->path()); !s.ok()) {
+      return ReportError("merge", s);
+    }
+    if (Status s = staging->Commit(); !s.ok()) return ReportError("merge", s);
+    std::printf("merged %zu render parts into %s\n", parts.size(), out.c_str());
+    return 0;
+  }
   return ReportError("merge", NotFoundError(parts.front().string(),
                                             ": not a part (no ", fit::kFitPartFile,
-                                            " or resample_part.json): parts are what `reflcap "
-                                            "resample|fit --shard I/N` write"));
+                                            ", resample_part.json or render_report.json): parts "
+                                            "are what `reflcap resample|fit|render --shard I/N` "
+                                            "write"));
 }
 
 }  // namespace reflcap::cli

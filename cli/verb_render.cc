@@ -54,6 +54,10 @@ int RunRender(int argc, char** argv) {
               "threads writing the output files while later images render (default 0: one per "
               "hardware thread)");
   args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
+  std::string shard_text;
+  args.AddString("shard", &shard_text, "I/N",
+                 "render only shard I of N of the selected photographs (a contiguous range) and "
+                 "write a part for reflcap merge (default: all of them)");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 2, &help); !s.ok()) {
     std::fprintf(stderr, "reflcap render: %s\n", s.message().c_str());
@@ -83,6 +87,12 @@ int RunRender(int argc, char** argv) {
   if (!shadow_map.empty() && backend != "vulkan") return usage("--shadow-map needs --backend vulkan");
   if (!shadow_map.empty() && shadow_map != "auto" && shadow_map != "cube" && shadow_map != "fitted") {
     return usage("--shadow-map: \"" + shadow_map + "\" is not one of auto, cube, fitted");
+  }
+  Shard shard;
+  if (!shard_text.empty()) {
+    auto parsed = ParseShard(shard_text);
+    if (!parsed.ok()) return usage(parsed.status().message());
+    shard = *parsed;
   }
   auto capture = ReadCapture(capture_path);
   if (!capture.ok()) return ReportError("render", capture.status());
@@ -122,6 +132,7 @@ int RunRender(int argc, char** argv) {
   options.cast_shadows = !no_shadows;
   options.height_shadows = !no_height_shadows;
   options.writers = writers;
+  options.shard = shard;
   std::string device_name = "the cpu";
   StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER

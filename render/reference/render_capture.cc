@@ -17,6 +17,7 @@
 #include "engine/image/png_io.h"
 #include "engine/mesh/mesh_io.h"
 #include "engine/core/worker_pool.h"
+#include "engine/texel/sample_store.h"
 
 namespace reflcap::render {
 namespace fs = std::filesystem;
@@ -208,6 +209,12 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
     return FailedPreconditionError(capture.json_path.string(), ": no image in split \"",
                                    SplitSelectionName(options.split), "\"");
   }
+  const size_t selected_total = selected.size();
+  if (options.shard.count > 1) {
+    REFLCAP_ASSIGN_OR_RETURN(ItemRange range,
+                             ShardRange(options.shard, uint32_t(selected.size()), "selected images"));
+    selected = std::vector<size_t>(selected.begin() + range.begin, selected.begin() + range.end);
+  }
 
   CaptureRenderSummary summary;
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<FittedCapture> fitted,
@@ -371,8 +378,124 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                              ? "none: the camera is not orthographic"
                              : "none: off (--no-shadows or --no-height-shadows)"}};
   }
+  if (options.shard.count > 1) {
+    // What the merge checks the parts against each other with.
+    const StatusOr<std::string> capture_text = ReadTextFile(capture.json_path);
+    const StatusOr<std::string> fit_text = ReadTextFile(params_exr);
+    report["shard"] = {
+        {"index", options.shard.index},
+        {"count", options.shard.count},
+        {"selected_images", selected_total},
+        {"first", selected.front()},
+        {"identity",
+         {{"capture_crc32", capture_text.ok() ? Crc32(capture_text->data(), capture_text->size()) : 0u},
+          {"fit_crc32", fit_text.ok() ? Crc32(fit_text->data(), fit_text->size()) : 0u},
+          {"backend", backend.backend},
+          {"split", SplitSelectionName(options.split)},
+          {"supersampling", options.supersampling},
+          {"cast_shadows", options.cast_shadows},
+          {"height_shadows", options.height_shadows}}}};
+  }
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "render_report.json", report.dump(2) + "\n"));
   return summary;
+}
+
+Status MergeRenderParts(const std::vector<fs::path>& parts, const fs::path& out_dir) {
+  if (parts.empty()) return InvalidArgumentError("merge: no parts given");
+  std::vector<Json> reports;
+  for (const fs::path& part : parts) {
+    const fs::path file = part / "render_report.json";
+    REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadTextFile(file));
+    Json r = Json::parse(text, nullptr, false);
+    if (!r.is_object() || !r.contains("shard") || !r["shard"].is_object() ||
+        !r.contains("images") || !r["images"].is_array()) {
+      return DataLossError(file.string(), ": shard/images: not a render part (render --shard I/N)");
+    }
+    reports.push_back(std::move(r));
+  }
+  const Json& first = reports.front()["shard"];
+  const int count = first.value("count", 0);
+  std::vector<int> of_shard(size_t(std::max(count, 0)), -1);
+  for (size_t i = 0; i < reports.size(); ++i) {
+    const Json& sh = reports[i]["shard"];
+    const std::string file = (parts[i] / "render_report.json").string();
+    const Json mine = sh.value("identity", Json::object()), theirs = first.value("identity", Json::object());
+    if (mine != theirs) {
+      std::string differs = "identity";
+      for (auto it = theirs.begin(); it != theirs.end(); ++it) {
+        if (!mine.contains(it.key()) || mine[it.key()] != it.value()) {
+          differs = "identity." + it.key();
+          break;
+        }
+      }
+      return FailedPreconditionError(file, ": shard.", differs, " differs from ",
+                                     (parts.front() / "render_report.json").string(),
+                                     ": the parts are not of one render");
+    }
+    const int index = sh.value("index", -1);
+    if (sh.value("count", 0) != count || sh.value("selected_images", 0) != first.value("selected_images", 0)) {
+      return FailedPreconditionError(file, ": shard count differs from ",
+                                     (parts.front() / "render_report.json").string());
+    }
+    if (index < 0 || index >= count) return DataLossError(file, ": shard.index: ", index, " not in [0, ", count, ")");
+    if (of_shard[size_t(index)] >= 0) {
+      return FailedPreconditionError(file, ": shard ", index, " is also ",
+                                     (parts[size_t(of_shard[size_t(index)])] / "render_report.json").string());
+    }
+    of_shard[size_t(index)] = int(i);
+  }
+  for (int s = 0; s < count; ++s) {
+    if (of_shard[size_t(s)] < 0) {
+      return FailedPreconditionError("merge: ", parts.size(), " parts given for a render of ", count,
+                                     " shards (shard ", s, " is missing)");
+    }
+  }
+  // Every part's files, checked before any is copied; then one report in shard order.
+  Json images = Json::array();
+  Json merged = reports[size_t(of_shard[0])];
+  double load_s = 0, render_s = 0, write_s = 0, total_s = 0;
+  for (int s = 0; s < count; ++s) {
+    const size_t i = size_t(of_shard[size_t(s)]);
+    for (const Json& image : reports[i]["images"]) {
+      for (const char* key : {"render", "mask", "aux"}) {
+        const fs::path from = parts[i] / image.value(key, "");
+        std::error_code ec;
+        if (!fs::is_regular_file(from, ec)) {
+          return NotFoundError(from.string(), ": missing (listed in ",
+                               (parts[i] / "render_report.json").string(), ")");
+        }
+      }
+      images.push_back(image);
+    }
+    const Json t = reports[i].value("timings", Json::object());
+    load_s += t.value("load_s", 0.0);
+    render_s += t.value("render_s", 0.0);
+    write_s += t.value("write_s", 0.0);
+    total_s += t.value("total_s", 0.0);
+  }
+  if (images.size() != first.value("selected_images", size_t{0})) {
+    return DataLossError((parts.front() / "render_report.json").string(), ": the parts list ",
+                         images.size(), " images, the render selected ",
+                         first.value("selected_images", size_t{0}));
+  }
+  for (int s = 0; s < count; ++s) {
+    const size_t i = size_t(of_shard[size_t(s)]);
+    for (const Json& image : reports[i]["images"]) {
+      for (const char* key : {"render", "mask", "aux"}) {
+        const fs::path rel = image.value(key, "");
+        std::error_code ec;
+        fs::create_directories((out_dir / rel).parent_path(), ec);
+        fs::copy_file(parts[i] / rel, out_dir / rel, fs::copy_options::overwrite_existing, ec);
+        if (ec) return InternalError((out_dir / rel).string(), ": cannot copy: ", ec.message());
+      }
+    }
+  }
+  merged["images"] = images;
+  merged.erase("shard");
+  merged["timings"] = {{"load_s", load_s}, {"render_s", render_s}, {"write_s", write_s},
+                       {"write_tail_s", 0.0}, {"total_s", total_s}};
+  merged["shards"] = count;
+  return WriteTextFileAtomic(out_dir / "render_report.json", merged.dump(2) + "\n");
 }
 
 }  // namespace reflcap::render

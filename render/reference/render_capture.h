@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "engine/capture/capture.h"
+#include "engine/core/shard.h"
 #include "engine/core/status.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
@@ -84,6 +85,10 @@ struct CaptureRenderOptions {
   // Threads writing the output files while later images render (EXR compression is most of a
   // GPU render's time); 0 = one per hardware thread. [0, 256].
   int writers = 0;
+  // Shard `shard.index` of `shard.count` (`render --shard I/N`): only a contiguous range of the
+  // selected photographs (ShardRange over them, in capture order); render_report.json then
+  // carries `shard` and MergeRenderParts joins the parts.
+  Shard shard;
   Status Validate() const;
 };
 
@@ -104,6 +109,14 @@ struct CaptureRenderSummary {
 // images render. FailedPrecondition when no photograph is selected; errors of LoadFittedCapture,
 // of rendering (naming capture.json and images[i]) and of writing (Internal, naming the file).
 // After an error the folder may hold some images' files (the CLI stages it: nothing appears).
+// `reflcap merge` of render parts: checks that `parts` are the shards 0..N-1 of one render (the
+// same capture, fit and options, each shard once, their images tiling the selection) and
+// copies their files into `out_dir` (which must exist: the caller stages it), with one
+// render_report.json listing every image in capture order. FailedPrecondition naming the part
+// and field for parts that do not belong together; NotFound/DataLoss for a missing file.
+Status MergeRenderParts(const std::vector<std::filesystem::path>& parts,
+                        const std::filesystem::path& out_dir);
+
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture,
                                              const std::filesystem::path& params_exr,
                                              const std::filesystem::path& out_dir,

@@ -124,6 +124,53 @@ TEST(VerbsCli, RenderThenValidatePrintsTheNoiseBound) {
   }
 }
 
+TEST(VerbsCli, RenderShardsMergeIntoTheSameFiles) {
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string(), fit = cap + "/gt";
+  CliResult r = RunCli("render --quiet " + cap + " " + fit + " --out " + (dir / "whole").string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::string parts;
+  for (int i : {1, 2, 0}) {
+    const std::string part = (dir / ("part" + std::to_string(i))).string();
+    r = RunCli("render --quiet " + cap + " " + fit + " --out " + part + " --shard " + std::to_string(i) + "/3", dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    parts += " " + part;
+  }
+  // A part of another render (other options) and a missing shard are refused, nothing written.
+  r = RunCli("render --quiet " + cap + " " + fit + " --out " + (dir / "other").string() +
+                 " --shard 2/3 --no-shadows", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path out = dir / "merged";
+  r = RunCli("merge " + (dir / "part0").string() + " " + (dir / "part1").string() + " " +
+                 (dir / "other").string() + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("shard.identity.cast_shadows"), std::string::npos) << r.err;
+  r = RunCli("merge " + (dir / "part0").string() + " " + (dir / "part1").string() + " --out " + out.string(), dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("shard 2 is missing"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+
+  r = RunCli("merge" + parts + " --out " + out.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  int compared = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir / "whole")) {
+    if (!e.is_regular_file() || e.path().filename() == "render_report.json") continue;
+    const fs::path rel = fs::relative(e.path(), dir / "whole");
+    EXPECT_EQ(ReadTextFile(e.path()).value(), ReadTextFile(out / rel).value()) << rel;
+    ++compared;
+  }
+  const nlohmann::json whole = nlohmann::json::parse(ReadTextFile(dir / "whole/render_report.json").value());
+  const nlohmann::json merged = nlohmann::json::parse(ReadTextFile(out / "render_report.json").value());
+  ASSERT_EQ(merged["images"].size(), whole["images"].size());
+  EXPECT_EQ(compared, 3 * int(whole["images"].size()));  // image, mask and aux of each
+  for (size_t i = 0; i < whole["images"].size(); ++i) {
+    EXPECT_EQ(merged["images"][i]["file"], whole["images"][i]["file"]);
+  }
+  // validate reads the merged folder like a single render.
+  r = RunCli("validate --quiet " + cap + " " + out.string() + " --out " + (dir / "report").string(), dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
 TEST(VerbsCli, ImportDiligentThenInfo) {
   testing::ScratchDir dir;
   // A 9x9 DiLiGenT-like object: a flat disc facing the camera under 4 lights, 8-bit images.
