@@ -77,7 +77,7 @@ int RunMerge(int argc, char** argv) {
   if (fs::exists(parts.front() / "resample_part.json", ec)) {
     auto staging = StagingDir::Create(out, overwrite);
     if (!staging.ok()) return ReportError("merge", staging.status());
-    auto summary = resample::MergeResampleParts(parts, staging->path());
+    auto summary = resample::MergeResampleParts(parts, staging->path(), threads);
     if (!summary.ok()) return ReportError("merge", summary.status());
     if (Status s = staging->Commit(); !s.ok()) return ReportError("merge", s);
     std::printf("merged %zu resample parts into %s\n%s", parts.size(), out.c_str(),

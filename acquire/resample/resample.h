@@ -164,9 +164,10 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& capture, const Resample
 // the run's), then writes into `out_dir` (which must exist: the caller stages it) the store,
 // maps and report one run writes: every chunk's texels take the parts' samples in shard order,
 // so chunks, store.json, atlas.bin and the maps are bit-identical to a single run's (the report
-// differs in timings and says `shards`). FailedPrecondition naming the part and field for parts
+// differs in timings and says `shards`). `threads` chunks are joined at a time (0 = all cores).
+// FailedPrecondition naming the part and field for parts
 // that do not belong together; NotFound/DataLoss naming a missing or corrupt file.
 StatusOr<ResampleSummary> MergeResampleParts(const std::vector<std::filesystem::path>& parts,
-                                             const std::filesystem::path& out_dir);
+                                             const std::filesystem::path& out_dir, int threads = 0);
 
 }  // namespace reflcap::resample

@@ -1,8 +1,10 @@
 // MergeResampleParts: the parts of `reflcap resample --shard I/N` -> the store, maps and report
 // of one run (see resample.h).
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -13,6 +15,7 @@
 #include "acquire/resample/resample_outputs.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
+#include "engine/core/parallel.h"
 #include "engine/texel/sample_store.h"
 
 namespace reflcap::resample {
@@ -75,7 +78,7 @@ StatusOr<Part> ReadPart(const fs::path& dir) {
 }  // namespace
 
 StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
-                                             const fs::path& out_dir) {
+                                             const fs::path& out_dir, int threads) {
   const auto start = std::chrono::steady_clock::now();
   if (dirs.empty()) return InvalidArgumentError("merge: no parts given");
   std::vector<Part> parts;
@@ -145,7 +148,13 @@ StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
     info.images += p.store->info().images;
     tally.Add(p.tally);
   }
-  for (uint32_t c = 0; c < base.chunks; ++c) {
+  // One chunk per task, `threads` at a time: reading, joining and writing a chunk is independent
+  // of the others (the store's reader is thread-safe).
+  std::mutex mutex;
+  Status first_error;
+  std::atomic<bool> failed{false};
+  std::atomic<uint64_t> samples{0};
+  auto merge_chunk = [&](uint32_t c) -> Status {
     std::vector<TexelSampleChunk> pieces;
     for (int s = 0; s < first.shard.count; ++s) {
       REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk piece,
@@ -167,9 +176,24 @@ StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
       }
       merged.offsets.push_back(merged.samples.size());
     }
-    info.samples += merged.samples.size();
-    REFLCAP_RETURN_IF_ERROR(WriteSampleChunk(out_dir / SampleChunkFileName(c), merged));
-  }
+    samples += merged.samples.size();
+    return WriteSampleChunk(out_dir / SampleChunkFileName(c), merged);
+  };
+  ParallelFor(
+      0, base.chunks, 1,
+      [&](int64_t b, int64_t e, int) {
+        for (int64_t c = b; c < e && !failed; ++c) {
+          Status st = merge_chunk(uint32_t(c));
+          if (!st.ok()) {
+            std::lock_guard<std::mutex> lock(mutex);
+            if (first_error.ok()) first_error = st;
+            failed = true;
+          }
+        }
+      },
+      threads);
+  REFLCAP_RETURN_IF_ERROR(first_error);
+  info.samples = samples;
   REFLCAP_RETURN_IF_ERROR(WriteSampleStoreInfo(out_dir, info));
 
   // Coverage: the shards' views are disjoint, so counts add up and sets unite.

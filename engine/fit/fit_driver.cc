@@ -376,7 +376,6 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   const SampleStoreInfo& info = store.info();
   FitStore& fits = *pass->fits;
   auto& cached = pass->cached;
-  const uint64_t cached_bytes = pass->cached_bytes;
   const double read_seconds = pass->read_seconds, fit_seconds = pass->fit_seconds;
   const size_t iso_chosen = pass->iso_chosen;
   const VulkanFitStats& vulkan_stats = pass->vulkan_stats;
@@ -384,6 +383,10 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   const bool select_model =
       options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
   auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
+  const uint64_t cache_budget =
+      (options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0
+          ? SampleCacheBudget()
+          : 0;
   FitRunSummary summary;
   summary.device = device;
   // Lobe transfer (lobe_transfer.h): candidates from the maps, then a second pass over the
@@ -427,6 +430,16 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
       const auto test_start = std::chrono::steady_clock::now();
       visit(*chunk);
       transfer_test_seconds += Seconds(test_start);
+      // A chunk read here (the fit pass did not keep it: a merge, or a resumed chunk) is kept for
+      // the later rounds and the clusters while the budget allows, as the fit pass keeps its own.
+      if (loaded.ok()) {
+        const uint64_t bytes = loaded->samples.size() * sizeof(BrdfSample) +
+                               loaded->offsets.size() * sizeof(uint64_t);
+        if (pass->cached_bytes + bytes <= cache_budget) {
+          pass->cached_bytes += bytes;
+          cached[c] = std::move(loaded).value();
+        }
+      }
     }
     return OkStatus();
   };
@@ -632,7 +645,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                          {"lobe_transfer_read_wait", transfer_chunk_read_seconds},
                          {"lobe_transfer_test", transfer_chunk_test_seconds},
                          {"clusters", cluster_seconds},
-                         {"lobe_transfer_kept_mib", double(cached_bytes) / (1 << 20)},
+                         {"lobe_transfer_kept_mib", double(pass->cached_bytes) / (1 << 20)},
                          {"albedo_fill", fill_seconds},
                          {"write_maps", write_seconds_so_far},
                          {"total", summary.total_seconds}};
