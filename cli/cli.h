@@ -71,6 +71,8 @@ int RunCalibrate(int argc, char** argv); // verb_calibrate.cc
 int RunHdr(int argc, char** argv);       // verb_hdr.cc
 int RunScan(int argc, char** argv);      // verb_scan.cc
 int RunMerge(int argc, char** argv);     // verb_merge.cc
+int RunExport(int argc, char** argv);    // verb_export.cc
+int RunView(int argc, char** argv);      // verb_view.cc
 
 
 }  // namespace reflcap::cli

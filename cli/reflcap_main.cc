@@ -24,6 +24,8 @@ constexpr char kUsage[] =
     "  render CAPTURE FIT --out DIR     re-render photographs from a fit\n"
     "  run CAPTURE --out DIR            resample -> fit -> render holdout -> validate\n"
     "  validate CAPTURE RENDERS --out REPORT   compare re-renders with photographs\n"
+    "  export FIT --gltf OUT.glb        a fit as glTF 2.0 (+ raw Lafortune parameters)\n"
+    "  view FIT --out DIR               a self-contained relightable viewer page\n"
     "  import-diligent OBJECT_DIR --out CAPTURE   DiLiGenT object -> capture/1\n"
     "  bench --out DIR [--quick]        benchmark matrix: speed, error, scaling, viewpoints\n"
     "\n"
@@ -68,6 +70,8 @@ int main(int argc, char** argv) {
   if (verb == "hdr") return cli::RunHdr(argc, argv);
   if (verb == "scan") return cli::RunScan(argc, argv);
   if (verb == "merge") return cli::RunMerge(argc, argv);
+  if (verb == "export") return cli::RunExport(argc, argv);
+  if (verb == "view") return cli::RunView(argc, argv);
   std::fprintf(stderr, "reflcap: unknown verb \"%s\"\n\n%s", verb.c_str(), kUsage);
   return cli::kExitUsage;
 }
