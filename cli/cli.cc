@@ -4,7 +4,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <sstream>
+
+#include <nlohmann/json.hpp>
 
 namespace reflcap::cli {
 namespace {
@@ -153,6 +156,18 @@ std::string ArgParser::Help() const {
          "  --help                 this text\n"
          "\nexit codes: 0 ok, 1 usage error, 2 bad input, 3 backend unavailable, 4 internal error\n";
   return out.str();
+}
+
+void PrintShardSummary(const std::string& stage, int index, int count, const std::string& part,
+                       double seconds, const std::vector<std::pair<std::string, double>>& numbers) {
+  std::error_code ec;
+  const std::filesystem::path absolute = std::filesystem::absolute(part, ec);
+  nlohmann::json summary = {{"stage", stage},
+                            {"shard", std::to_string(index) + "/" + std::to_string(count)},
+                            {"part", (ec ? std::filesystem::path(part) : absolute.lexically_normal()).string()},
+                            {"seconds", seconds}};
+  for (const auto& [name, value] : numbers) summary[name] = value;
+  std::printf("reflcap-shard-summary %s\n", summary.dump().c_str());
 }
 
 int ReportError(const std::string& verb, const Status& status) {

@@ -6,6 +6,7 @@
 // inconsistent file or field); 3 a requested backend is unavailable; 4 internal error.
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "engine/core/status.h"
@@ -52,6 +53,12 @@ class ArgParser {
   std::string list_name_, list_help_;
   std::vector<std::string>* list_ = nullptr;
 };
+
+// The last line a shard run prints on stdout, for batch systems' logs: "reflcap-shard-summary "
+// and one JSON object {"stage", "shard": "I/N", "part" (absolute path), "seconds", then
+// `numbers` (name -> value)}.
+void PrintShardSummary(const std::string& stage, int index, int count, const std::string& part,
+                       double seconds, const std::vector<std::pair<std::string, double>>& numbers);
 
 // Prints `status` as "reflcap <verb>: <message>" on stderr and returns its exit code.
 int ReportError(const std::string& verb, const Status& status);

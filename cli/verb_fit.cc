@@ -169,6 +169,10 @@ int RunFit(int argc, char** argv) {
     std::printf("fit part %d/%d  %s  (%s): %zu texels, %.0f fits/s, %s\n", control.shard.index,
                 control.shard.count, out.c_str(), summary->device.c_str(), summary->texels,
                 summary->fits_per_second, FormatDuration(summary->total_seconds).c_str());
+    PrintShardSummary("fit", control.shard.index, control.shard.count, out, summary->total_seconds,
+                      {{"texels", double(summary->texels)},
+                       {"fit_seconds", summary->fit_seconds},
+                       {"fits_per_second", summary->fits_per_second}});
     return 0;
   }
   std::printf("fit  %s  (%s%s)\n", out.c_str(), backend->backend == fit::Backend::kVulkan ? "vulkan: " : "",

@@ -151,7 +151,12 @@ int RunRender(int argc, char** argv) {
               summary->images, render::SplitSelectionName(*selection), summary->texels,
               summary->num_lobes, device_name.c_str(), FormatDuration(summary->total_s).c_str(),
               out.c_str());
-  std::printf("next: reflcap validate %s %s --out REPORT\n", capture_path.c_str(), out.c_str());
+  if (shard.count > 1) {
+    PrintShardSummary("render", shard.index, shard.count, out, summary->total_s,
+                      {{"images", double(summary->images)}});
+  } else {
+    std::printf("next: reflcap validate %s %s --out REPORT\n", capture_path.c_str(), out.c_str());
+  }
   return 0;
 }
 

@@ -155,6 +155,12 @@ int RunResample(int argc, char** argv) {
   std::printf("  sample store %s; report %s; coverage %s\n", out.c_str(),
               (fs::path(out) / "resample_report.json").string().c_str(),
               (fs::path(out) / "coverage.png").string().c_str());
+  if (options.shard.count > 1) {
+    PrintShardSummary("resample", options.shard.index, options.shard.count, out, summary->seconds,
+                      {{"images", double(summary->images)},
+                       {"samples_kept", double(summary->samples_kept)},
+                       {"texels_with_samples", double(summary->texels_with_samples)}});
+  }
   return 0;
 }
 

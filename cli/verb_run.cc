@@ -130,6 +130,8 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
       summary.validation,
       validate::RunValidation(capture, dir / "renders", dir / "report", validate_options));
   summary.validate_s = SecondsSince(start);
+  // The reports name the samples, fit and renders they describe: by their final paths.
+  REFLCAP_RETURN_IF_ERROR(staging.NameFinalPaths());
   REFLCAP_RETURN_IF_ERROR(staging.Commit());
   return summary;
 }

@@ -142,6 +142,7 @@ int RunDemo(int argc, char** argv) {
   if (Status s = WriteTextFileAtomic(staging->path() / ".reflcap-demo", "reflcap demo output\n"); !s.ok()) {
     return ReportError("demo", s);
   }
+  if (Status s = staging->NameFinalPaths(); !s.ok()) return ReportError("demo", s);
   if (Status s = staging->Commit(); !s.ok()) return ReportError("demo", s);
   const fs::path run = fs::path(out) / "run";
   std::printf("  %s\n", PipelineSummaryLine(*pipeline).c_str());

@@ -3,9 +3,14 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <system_error>
+#include <utility>
+#include <vector>
+
+#include "engine/core/html.h"
 
 namespace reflcap {
 namespace fs = std::filesystem;
@@ -92,6 +97,48 @@ StagingDir::~StagingDir() {
   if (committed_) return;
   std::error_code ec;
   fs::remove_all(staging_, ec);
+}
+
+Status StagingDir::NameFinalPaths() {
+  const std::string from = staging_.string(), to = destination_.string();
+  // The forms a path takes in the files reflcap writes: raw, inside a JSON string (nlohmann's
+  // escapes: backslash, quote, control characters; UTF-8 as is), in HTML.
+  auto json_escaped = [](const std::string& text) {
+    std::string out;
+    for (const char c : text) {
+      if (c == '"' || c == '\\') {
+        out += '\\';
+        out += c;
+      } else if (static_cast<unsigned char>(c) < 0x20) {
+        char buf[8];
+        std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(static_cast<unsigned char>(c)));
+        out += buf;
+      } else {
+        out += c;
+      }
+    }
+    return out;
+  };
+  const std::vector<std::pair<std::string, std::string>> forms = {
+      {from, to}, {json_escaped(from), json_escaped(to)}, {HtmlEscape(from), HtmlEscape(to)}};
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(staging_, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    const fs::path& p = it->path();
+    if (!it->is_regular_file(ec) || (p.extension() != ".json" && p.extension() != ".html")) continue;
+    REFLCAP_ASSIGN_OR_RETURN(std::string text, ReadTextFile(p));
+    bool changed = false;
+    for (const auto& [a, b] : forms) {
+      if (a == b || a.empty()) continue;
+      for (size_t at = text.find(a); at != std::string::npos; at = text.find(a, at + b.size())) {
+        text.replace(at, a.size(), b);
+        changed = true;
+      }
+    }
+    if (changed) REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(p, text));
+  }
+  if (ec) return InternalError(staging_.string(), ": cannot list the folder: ", ec.message());
+  return OkStatus();
 }
 
 Status StagingDir::Commit() {

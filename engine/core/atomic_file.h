@@ -34,6 +34,11 @@ class StagingDir {
   // Where to write now.
   const std::filesystem::path& path() const { return staging_; }
   const std::filesystem::path& destination() const { return destination_; }
+  // Reports written inside the folder name the files they describe by path, which is the
+  // staging path until Commit: this rewrites, in every .json and .html file under the folder,
+  // each occurrence of the staging path (as written raw, JSON-escaped or HTML-escaped) to the
+  // destination, so the committed reports name folders that exist. Internal on an I/O error.
+  Status NameFinalPaths();
   Status Commit();
 
  private:

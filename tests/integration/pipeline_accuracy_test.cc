@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/core/atomic_file.h"
 #include "engine/core/check.h"
 #include "tests/support/test_support.h"
 
@@ -97,6 +98,18 @@ TEST(PipelineAccuracy, AllMatteInModelCaptureReachesTheNoiseBound) {
   std::printf("all-matte capture: holdout PSNR %.2f dB, noise bound %.2f dB\n", psnr, bound);
   EXPECT_GT(psnr, bound - kInModelGapDb);
   EXPECT_LT(psnr, bound);
+  // The reports name the run's folders as they are after it, not the staging folder.
+  int reports = 0;
+  for (const auto& e : fs::recursive_directory_iterator(out)) {
+    const fs::path& p = e.path();
+    if (p.extension() != ".json" && p.extension() != ".html") continue;
+    ++reports;
+    const std::string text = ReadTextFile(p).value();
+    EXPECT_EQ(text.find(".tmp-"), std::string::npos) << p << " names a staging folder";
+  }
+  EXPECT_GE(reports, 5);  // store.json, resample, fit, render reports, metrics.json, report.html
+  const std::string fit_report = ReadTextFile(out / "fit/fit_report.json").value();
+  EXPECT_NE(fit_report.find(fs::absolute(out / "samples").lexically_normal().string()), std::string::npos);
 }
 
 }  // namespace

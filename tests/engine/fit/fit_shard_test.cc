@@ -107,9 +107,16 @@ TEST_F(FitShardCli, MergedShardsEqualOneRunBitForBit) {
   for (int i : {3, 0, 4, 1, 2}) {
     const fs::path part = dir_ / ("part" + std::to_string(i));
     const CliResult r = RunCli("fit " + samples_ + " --out " + part.string() + " --backend cpu --shard " +
-                                   std::to_string(i) + "/" + std::to_string(kShards) + " --quiet",
+                                   std::to_string(i) + "/" + std::to_string(kShards),
                                dir_);
     ASSERT_EQ(r.exit_code, 0) << r.err;
+    // The last line on stdout is the shard's JSON summary, for the batch system's log.
+    const std::string line = "reflcap-shard-summary {";
+    ASSERT_NE(r.out.find(line), std::string::npos) << r.out;
+    const Json summary = Json::parse(r.out.substr(r.out.find(line) + line.size() - 1));
+    EXPECT_EQ(summary["stage"], "fit");
+    EXPECT_EQ(summary["shard"], std::to_string(i) + "/" + std::to_string(kShards));
+    EXPECT_GT(summary["texels"].get<double>(), 0);
     EXPECT_TRUE(fs::exists(part / kFitPartFile));
     EXPECT_FALSE(fs::exists(part / "params.exr"));  // a part holds fits, not maps
     parts += " " + part.string();
