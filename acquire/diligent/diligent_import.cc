@@ -164,6 +164,12 @@ StatusOr<ImportSummary> ImportDiligent(const fs::path& object_dir, const fs::pat
     summary.normal_texels += std::isfinite(length) && length > 0.5f;
   }
   if (summary.mask_pixels == 0) return InvalidArgumentError((object_dir / "mask.png").string(), ": empty mask");
+  // A capture without a single texel would only fail later, in resample, far from the cause
+  // (tests/cli/bad_input_corpus_test: a normals.exr of NaN was imported).
+  if (summary.normal_texels == 0) {
+    return InvalidArgumentError((object_dir / "normals.exr").string(), ": none of the ",
+                                summary.mask_pixels, " masked pixels has a finite, non-zero normal");
+  }
   if (summary.normal_texels < summary.mask_pixels) {
     REFLCAP_LOG(kWarning) << (object_dir / "normals.exr").string() << ": "
                           << summary.mask_pixels - summary.normal_texels

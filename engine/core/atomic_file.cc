@@ -76,12 +76,21 @@ StatusOr<StagingDir> StagingDir::Create(const fs::path& destination, bool overwr
                                      "replace it, or choose another --out)");
     }
   }
+  // An output folder that cannot be made where the user asked is bad input (exit 2), named as
+  // given, not by the staging folder the user never named.
   fs::path parent = dest.parent_path();
   fs::create_directories(parent, ec);
-  if (ec) return InternalError(parent.string(), ": cannot create folder: ", ec.message());
+  if (ec) {
+    return FailedPreconditionError(destination.string(), ": cannot create folder ",
+                                   parent.string(), ": ", ec.message());
+  }
   fs::path staging = parent / ("." + dest.filename().string() + TempSuffix());
   fs::create_directories(staging, ec);
-  if (ec) return InternalError(staging.string(), ": cannot create folder: ", ec.message());
+  if (ec) {
+    return FailedPreconditionError(destination.string(), ": cannot create folder (its staging "
+                                   "folder ", staging.filename().string(), " in ", parent.string(),
+                                   "): ", ec.message());
+  }
   return StagingDir(dest, staging, overwrite);
 }
 

@@ -16,12 +16,14 @@
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfPixelType.h>
+#include <OpenEXR/openexr.h>
 
 #include <cmath>
 #include <cstdint>
 #include <exception>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <set>
 #include <system_error>
 #include <utility>
@@ -47,6 +49,185 @@ constexpr float kHalfMax = 65504.0f;
 // memory before OpenEXR noticed the damage.
 constexpr uint64_t kMaxSamples = uint64_t(1) << 32;
 
+// OpenEXR's magic number and the version-field flag of multi-part files.
+constexpr int32_t kExrMagic = 20000630;
+constexpr int32_t kExrMultiPartFlag = 0x1000;
+// Attribute and type names are at most 255 bytes (31 without the long-names flag).
+constexpr size_t kExrMaxNameBytes = 256;
+
+// Bytes Imf 3.1 reads for the value of each fixed-size attribute type, whatever the declared
+// size says (Imf::TypedAttribute<T>::readValueFrom).
+int FixedAttributeBytes(const std::string& type) {
+  static const std::map<std::string, int> kBytes = {
+      {"box2i", 16}, {"box2f", 16}, {"chromaticities", 32}, {"compression", 1}, {"envmap", 1},
+      {"lineOrder", 1}, {"deepImageState", 1}, {"double", 8}, {"float", 4}, {"int", 4},
+      {"keycode", 28}, {"m33f", 36}, {"m33d", 72}, {"m44f", 64}, {"m44d", 128}, {"rational", 8},
+      {"tiledesc", 9}, {"timecode", 8}, {"v2i", 8}, {"v2f", 8}, {"v2d", 16}, {"v3i", 12},
+      {"v3f", 12}, {"v3d", 24}};
+  auto it = kBytes.find(type);
+  return it == kBytes.end() ? -1 : it->second;
+}
+
+// Checks of the header before Imf::InputFile sees the file, all for inputs found by
+// tests/fuzz/exr_fuzzer. OpenEXR 3.1 (Imf and OpenEXRCore alike) allocates what a header declares
+// before reading it — an attribute's size, a string's length, a preview's pixels — so a 184-byte
+// file declaring a 1.6 GB attribute made it allocate 1.6 GB. And Imf reads fixed-size types and
+// channel lists without regard to the declared size, so on a damaged header it parses on where
+// the file holds other bytes, and finds such declarations there.
+//  1. CheckAttributeSizes walks the attributes (name, type, int32 size, value) of every part as
+//     Imf reads them, and refuses a declared size that runs past the end of the file or differs
+//     from what Imf will read (fixed-size types, chlist, preview, stringvector);
+//  2. CheckHeaderWithCore then parses the header with OpenEXRCore, and CheckPixelBytes bounds
+//     the pixels it declares by the file's size.
+// Anything else malformed (bad magic, overlong names, a cut) is left for OpenEXR to report.
+Status CheckAttributeSizes(const fs::path& path, uint64_t file_size) {
+  std::ifstream in(path, std::ios::binary);
+  int32_t magic = 0, version = 0;
+  if (!in.read(reinterpret_cast<char*>(&magic), 4) || magic != kExrMagic ||
+      !in.read(reinterpret_cast<char*>(&version), 4)) {
+    return OkStatus();
+  }
+  auto read_name = [&in](std::string* name) {
+    name->clear();
+    for (char c; in.get(c);) {
+      if (c == '\0') return true;
+      if (name->size() >= kExrMaxNameBytes) return false;
+      *name += c;
+    }
+    return false;
+  };
+  auto read_i32 = [&in](int32_t* v) { return bool(in.read(reinterpret_cast<char*>(v), 4)); };
+  const bool multi_part = (version & kExrMultiPartFlag) != 0;
+  std::set<std::string> names_in_part;
+  std::string name, type;
+  while (read_name(&name)) {
+    if (name.empty()) {  // end of a part's header; a multi-part file ends with an empty header
+      if (!multi_part || names_in_part.empty()) return OkStatus();
+      names_in_part.clear();
+      continue;
+    }
+    // Imf keeps the last of repeated attributes and OpenEXRCore the first, so the two would
+    // disagree on, say, the data window CheckPixelBytes bounds (a fuzzer input repeated it).
+    if (!names_in_part.insert(name).second) {
+      return DataLossError(path.string(), ": header attribute \"", name, "\" appears twice");
+    }
+    int32_t size = 0;
+    if (!read_name(&type) || !read_i32(&size)) return OkStatus();
+    const uint64_t at = uint64_t(in.tellg());
+    auto refuse = [&](const std::string& what) {
+      return DataLossError(path.string(), ": header attribute \"", name, "\" (", type, ") declares ",
+                           size, " bytes, ", what);
+    };
+    if (size < 0 || at > file_size || uint64_t(size) > file_size - at) {
+      return refuse(StrCat("past the end of the ", file_size, "-byte file"));
+    }
+    const int fixed = FixedAttributeBytes(type);
+    if (fixed >= 0 && size != fixed) return refuse(StrCat("but a ", type, " has ", fixed));
+    if (type == "chlist") {  // entries of name, 16 bytes, up to an empty name
+      std::string channel;
+      int64_t consumed = 0;
+      while (read_name(&channel) && !channel.empty()) {
+        consumed += int64_t(channel.size()) + 1 + 16;
+        if (consumed >= size) break;
+        in.seekg(16, std::ios::cur);
+      }
+      if (!in || !channel.empty() || consumed + 1 != size) {
+        return refuse("unlike the channel list it holds");
+      }
+    } else if (type == "preview") {  // width, height, then 4 bytes per pixel
+      int32_t width = 0, height = 0;
+      if (!read_i32(&width) || !read_i32(&height) || width < 0 || height < 0 ||
+          8 + 4 * uint64_t(width) * uint64_t(height) != uint64_t(size)) {
+        return refuse("unlike the preview image it holds");
+      }
+      in.seekg(size - 8, std::ios::cur);
+    } else if (type == "stringvector") {  // (int32 length, bytes) until the size is used up
+      int64_t left = size;
+      while (left > 0) {
+        int32_t length = 0;
+        if (left < 4 || !read_i32(&length) || length < 0 || length > left - 4) {
+          return refuse("unlike the strings it holds");
+        }
+        in.seekg(length, std::ios::cur);
+        left -= 4 + int64_t(length);
+      }
+    } else {
+      in.seekg(size, std::ios::cur);
+    }
+    if (!in) return OkStatus();
+  }
+  return OkStatus();
+}
+
+// No codec of OpenEXR packs pixels tighter than this many raw bytes per stored byte (deflate's
+// limit is about 1032:1; RLE's 128:1), with margin for DWA on flat images.
+constexpr uint64_t kMaxExrCompressionRatio = 4096;
+
+// Imf::InputFile allocates the line (or tile) buffers of a whole chunk when it opens a file, from
+// the data window alone: a 300-byte file declaring a 2^27-pixel-wide window made it allocate 2 GB
+// (tests/fuzz/exr_fuzzer). The pixels of a chunk, and of the whole image, are stored in the file,
+// so neither can exceed kMaxExrCompressionRatio times its size; a header claiming more is damaged.
+Status CheckPixelBytes(const fs::path& path, exr_context_t context, uint64_t file_size) {
+  exr_attr_box2i_t window{};
+  const exr_attr_chlist_t* channels = nullptr;
+  exr_storage_t storage = EXR_STORAGE_SCANLINE;
+  int32_t lines_per_chunk = 1;
+  if (exr_get_data_window(context, 0, &window) != EXR_ERR_SUCCESS ||
+      exr_get_channels(context, 0, &channels) != EXR_ERR_SUCCESS || channels == nullptr ||
+      exr_get_storage(context, 0, &storage) != EXR_ERR_SUCCESS) {
+    return OkStatus();  // Imf reports what is missing
+  }
+  uint64_t pixel_bytes = 0;  // per pixel, all channels (subsampling ignored: an upper bound)
+  for (int c = 0; c < channels->num_channels; ++c) {
+    pixel_bytes += channels->entries[c].pixel_type == EXR_PIXEL_HALF ? 2 : 4;
+  }
+  const uint64_t width = uint64_t(int64_t(window.max.x) - window.min.x + 1);
+  const uint64_t height = uint64_t(int64_t(window.max.y) - window.min.y + 1);
+  uint64_t chunk_pixels = 0;
+  if (storage == EXR_STORAGE_TILED || storage == EXR_STORAGE_DEEP_TILED) {
+    uint32_t tile_x = 0, tile_y = 0;
+    exr_tile_level_mode_t level{};
+    exr_tile_round_mode_t round{};
+    if (exr_get_tile_descriptor(context, 0, &tile_x, &tile_y, &level, &round) != EXR_ERR_SUCCESS) {
+      return OkStatus();
+    }
+    chunk_pixels = uint64_t(tile_x) * tile_y;
+  } else {
+    if (exr_get_scanlines_per_chunk(context, 0, &lines_per_chunk) != EXR_ERR_SUCCESS) return OkStatus();
+    chunk_pixels = width * uint64_t(std::max(lines_per_chunk, 1));
+  }
+  const uint64_t limit = kMaxExrCompressionRatio * file_size;
+  // Guard the products against overflow: each factor is below 2^32.
+  const double chunk_bytes = double(chunk_pixels) * double(pixel_bytes);
+  const double image_bytes = double(width) * double(height) * double(pixel_bytes);
+  if (chunk_bytes > double(limit) || image_bytes > double(limit)) {
+    return DataLossError(path.string(), ": header declares a ", width, "x", height, " image of ",
+                         channels->num_channels, " channels (", image_bytes,
+                         " bytes of pixels), more than a ", file_size, "-byte file can hold");
+  }
+  return OkStatus();
+}
+
+Status CheckHeaderWithCore(const fs::path& path, uint64_t file_size) {
+  // OpenEXRCore reports through a callback; the message of this thread's check lands here.
+  static thread_local std::string core_message;
+  core_message.clear();
+  exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+  init.error_handler_fn = [](exr_const_context_t, exr_result_t, const char* message) {
+    core_message = message ? message : "";
+  };
+  exr_context_t context = nullptr;
+  const exr_result_t result = exr_start_read(&context, path.c_str(), &init);
+  if (result != EXR_ERR_SUCCESS) {
+    if (context) exr_finish(&context);
+    return DataLossError(path.string(), ": ",
+                         core_message.empty() ? exr_get_default_error_message(result) : core_message);
+  }
+  const Status sizes = CheckPixelBytes(path, context, file_size);
+  exr_finish(&context);
+  return sizes;
+}
+
 Status CheckReadable(const fs::path& path) {
   std::error_code ec;
   if (fs::is_directory(path, ec)) {
@@ -54,7 +235,10 @@ Status CheckReadable(const fs::path& path) {
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) return NotFoundError(path.string(), ": cannot open");
-  return OkStatus();
+  const uintmax_t file_size = fs::file_size(path, ec);
+  if (ec) return OkStatus();  // not a regular file: OpenEXR reports what it finds
+  REFLCAP_RETURN_IF_ERROR(CheckAttributeSizes(path, uint64_t(file_size)));
+  return CheckHeaderWithCore(path, uint64_t(file_size));
 }
 
 std::string BoxToString(const Imath::Box2i& box) {

@@ -135,6 +135,27 @@ TEST(ScanSpec, RejectsBadInputNamingTheField) {
   }
 }
 
+// Regressions: inputs that used to throw out of LoadScanSpec and abort `reflcap scan` — a number
+// beyond a double's range (json out_of_range.406; tests/cli/bad_input_corpus_test) and a Gray bit
+// index too long for std::stoi (tests/fuzz/scan_spec_fuzzer).
+TEST(ScanSpec, RejectsNumbersAndIndicesOutOfRangeWithoutThrowing) {
+  ScratchDir dir;
+  Json j = Json::parse(*ReadTextFile(Scan().json));
+  j["turntable_angles_deg"][0] = 123.25;
+  std::string text = j.dump();
+  text.replace(text.find("123.25"), 6, "1e999");
+  const fs::path overflow = dir / "overflow.json";
+  reflcap::testing::WriteText(overflow, text);
+  const Status s = LoadScanSpec(overflow).status();
+  EXPECT_EQ(ExitCodeFor(s), 2) << s.ToString();
+  EXPECT_NE(s.message().find("overflow.json"), std::string::npos) << s.message();
+
+  const Status bit = LoadEdited(
+      [](Json* j) { (*j)["images"][2]["pattern"] = "gray_col_b99999999999999999999"; }, dir);
+  EXPECT_EQ(ExitCodeFor(bit), 2) << bit.ToString();
+  EXPECT_NE(bit.message().find("images[2].pattern"), std::string::npos) << bit.message();
+}
+
 TEST(ScanSpec, RejectsAnImageOfTheWrongSize) {
   ScratchDir dir;
   const fs::path small = dir / "small.png";

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -294,6 +295,68 @@ TEST(ExrIo, GarbageFileIsDataLoss) {
     EXPECT_TRUE(StartsWith(read.status().message(), path.string())) << read.status().message();
     EXPECT_EQ(ReadExrInfo(path).status().code(), StatusCode::kDataLoss);
   }
+}
+
+// Regression (tests/fuzz/exr_fuzzer): OpenEXR allocates a header attribute's declared size
+// before reading it, so a tiny file declaring a 1.6 GB attribute used to make it allocate
+// 1.6 GB. The reader now refuses sizes that run past the end of the file, before OpenEXR.
+TEST(ExrIo, AttributeSizePastTheEndOfTheFileIsDataLoss) {
+  ScratchDir dir;
+  const fs::path whole = dir / "whole.exr";
+  ASSERT_TRUE(WriteExr(whole, PatternImage(4, 3, 3)).ok());
+  const std::string bytes = ReadBytes(whole);
+  const int32_t declared = 1600000000;
+  const std::string attribute = std::string("reflcapHuge\0opaqueType\0", 23) +
+                                std::string(reinterpret_cast<const char*>(&declared), 4) + "xyz";
+  const fs::path huge = dir / "huge_attribute.exr";
+  WriteBytes(huge, bytes.substr(0, 8) + attribute + bytes.substr(8));
+  for (const Status& status : {ReadExrInfo(huge).status(), ReadExrRgb(huge).status()}) {
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << status.ToString();
+    EXPECT_TRUE(StartsWith(status.message(), huge.string())) << status.message();
+    EXPECT_NE(status.message().find("reflcapHuge"), std::string::npos) << status.message();
+  }
+  // A channel list shorter than its declared size: Imf parses a chlist to its end whatever its
+  // size says and then reads the following bytes as attributes (a fuzzer input made it allocate
+  // 1.6 GB that way); OpenEXRCore's parse, run first, refuses the mismatch.
+  const size_t chlist = bytes.find(std::string("chlist\0", 7));
+  ASSERT_NE(chlist, std::string::npos);
+  std::string short_list = bytes;
+  const int32_t too_short = 5;
+  short_list.replace(chlist + 7, 4, std::string(reinterpret_cast<const char*>(&too_short), 4));
+  const fs::path mismatch = dir / "chlist_size.exr";
+  WriteBytes(mismatch, short_list);
+  for (const Status& status : {ReadExrInfo(mismatch).status(), ReadExrRgb(mismatch).status()}) {
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << status.ToString();
+    EXPECT_TRUE(StartsWith(status.message(), mismatch.string())) << status.message();
+  }
+  // A 200000 x 200000 window in a file of a few hundred bytes: Imf allocates a chunk's line
+  // buffers from the window alone when it opens the file (2 GB for a fuzzer input).
+  std::string huge_window = bytes;
+  for (const char* box : {"dataWindow", "displayWindow"}) {
+    const size_t at = huge_window.find(std::string(box) + std::string("\0box2i\0", 7));
+    ASSERT_NE(at, std::string::npos) << box;
+    const int32_t max_xy[2] = {199999, 199999};
+    huge_window.replace(at + std::strlen(box) + 7 + 4 + 8, 8,
+                        std::string(reinterpret_cast<const char*>(max_xy), 8));
+  }
+  const fs::path huge_image = dir / "huge_window.exr";
+  WriteBytes(huge_image, huge_window);
+  for (const Status& status : {ReadExrInfo(huge_image).status(), ReadExrRgb(huge_image).status()}) {
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << status.ToString();
+    EXPECT_NE(status.message().find("200000x200000"), std::string::npos) << status.message();
+  }
+  // A repeated attribute: Imf keeps the last, OpenEXRCore the first, so they would disagree on
+  // what CheckPixelBytes bounds.
+  const fs::path twice = dir / "twice.exr";
+  const std::string repeated = std::string("compression\0compression\0", 24) +
+                               std::string("\x01\0\0\0\0", 5);
+  WriteBytes(twice, bytes.substr(0, 8) + repeated + bytes.substr(8));
+  const Status repeated_status = ReadExrInfo(twice).status();
+  EXPECT_EQ(repeated_status.code(), StatusCode::kDataLoss) << repeated_status.ToString();
+  EXPECT_NE(repeated_status.message().find("appears twice"), std::string::npos)
+      << repeated_status.message();
+  // The unmodified file still reads.
+  EXPECT_TRUE(ReadExrRgb(whole).ok());
 }
 
 TEST(ExrIo, HugeValuesAreClampedToHalfMax) {

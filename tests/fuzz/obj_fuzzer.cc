@@ -1,0 +1,22 @@
+// Fuzz target: Wavefront OBJ meshes (engine/mesh: LoadObj), checked with CheckMesh on success.
+#include <cstddef>
+#include <cstdint>
+
+#include "engine/mesh/mesh_io.h"
+#include "tests/fuzz/fuzz_util.h"
+#include "tests/fuzz/mesh_checks.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  static const bool quiet = (reflcap::fuzz::QuietLogs(), true);
+  (void)quiet;
+  const auto path = reflcap::fuzz::WriteScratch("mesh.obj", data, size);
+  reflcap::MeshLoadStats stats;
+  auto mesh = reflcap::LoadObj(path, &stats);
+  if (!mesh.ok()) {
+    reflcap::fuzz::Rejected(mesh.status());
+    return 0;
+  }
+  reflcap::fuzz::CheckMesh(*mesh);
+  FUZZ_CHECK(stats.triangles_kept == mesh->TriangleCount());
+  return 0;
+}
