@@ -183,6 +183,50 @@ Image ComposeFigure(const Image& photo_tm, const Image& render_tm, const Image& 
   return figure;
 }
 
+int ColourBarTicks(double error_scale) {
+  if (!(error_scale > 0) || !std::isfinite(error_scale)) return 5;
+  const double mantissa = error_scale / std::pow(10.0, std::floor(std::log10(error_scale)));
+  // A NiceCeil mantissa up to rounding of the power of ten.
+  constexpr double kMantissaTolerance = 1e-9;
+  for (double m : {2.5, 5.0}) {
+    if (std::abs(mantissa - m) < kMantissaTolerance * m) return 6;
+  }
+  return 5;
+}
+
+Image ComposeColourBar(double error_scale, const std::string& title) {
+  constexpr int kScale = 2;        // font scale: legible at the page's width
+  constexpr int kBarWidth = 512;   // px; wide enough for five labels of up to six characters
+  constexpr int kBarHeight = 24;   // px
+  const int pad = 4 * kScale, line = kGlyphHeight * kScale, tick = 3 * kScale;
+  const int ticks = ColourBarTicks(error_scale);
+  std::vector<std::string> labels(static_cast<size_t>(ticks));
+  int label_w = 0;
+  for (int k = 0; k < ticks; ++k) {
+    labels[k] = FormatPercent(error_scale * k / (ticks - 1));
+    if (k == ticks - 1) labels[k] += "+";
+    label_w = std::max(label_w, TextWidth(labels[k], kScale));
+  }
+  const int x0 = pad + label_w / 2;
+  const int width = std::max(x0 + kBarWidth + label_w / 2 + pad, TextWidth(title, kScale) + 2 * pad);
+  const int height = pad + line + pad + kBarHeight + tick + pad + line + pad;
+  Image figure(width, height, 3);
+  FillRect(&figure, 0, 0, width, height, kBackground);
+  DrawText(&figure, pad, pad, title, kScale, kText);
+  const int by = 3 * pad / 2 + line + pad / 2;
+  for (int x = 0; x < kBarWidth; ++x) {
+    FillRect(&figure, x0 + x, by, 1, kBarHeight, Viridis(double(x) / (kBarWidth - 1)));
+  }
+  for (int k = 0; k < ticks; ++k) {
+    const int tx = x0 + (kBarWidth - 1) * k / (ticks - 1);
+    FillRect(&figure, tx - kScale / 2, by + kBarHeight, kScale, tick, kText);
+    const int lw = TextWidth(labels[k], kScale);
+    DrawText(&figure, std::clamp(tx - lw / 2, 0, width - lw), by + kBarHeight + tick + pad,
+             labels[k], kScale, kText);
+  }
+  return figure;
+}
+
 Image ComposeRegionMap(const Image& photo_tm, const std::vector<uint8_t>& region_bits) {
   const int w = photo_tm.width, h = photo_tm.height;
   const int s = FontScale(h);

@@ -38,6 +38,15 @@ std::string FormatPercent(double fraction);
 Image ComposeFigure(const Image& photo_tm, const Image& render_tm, const Image& error,
                     double error_scale, const std::string& caption);
 
+// The legend of the error maps' shared colour scale, on its own: a horizontal Viridis bar from 0 to
+// error_scale (values above it saturate: the top label ends in "+"), labelled in % of the
+// photograph's peak at ColourBarTicks(error_scale) evenly spaced ticks from 0 to the scale, `title`
+// (one line) above.
+Image ComposeColourBar(double error_scale, const std::string& title);
+// Ticks of that legend, ends included: round steps for the scales NiceCeil picks (1 and 2 x 10^k in
+// quarters, 2.5 and 5 x 10^k in fifths: 0.5 and 1 x 10^k), quarters for any other scale.
+int ColourBarTicks(double error_scale);
+
 // The region labels of an image over its tone-mapped photograph (dimmed): shadow_edge red,
 // high_curvature blue, grazing yellow (where several apply, the first of these), elsewhere the
 // photograph (dimmed), not evaluated black; with a legend below.

@@ -392,6 +392,44 @@ double SsimSum(const Image& a, const Image& b, const Image& eval_mask, Image* ss
   return sum;
 }
 
+void MapErrorHistogram::Add(double map_error) {
+  constexpr int kBins = kMapErrorBinsPerDecade * kMapErrorDecades;
+  if (counts.empty()) counts.assign(kBins, 0);
+  int bin = 0;
+  if (map_error > kMapErrorMin) {
+    const double b = std::floor(std::log10(map_error / kMapErrorMin) * kMapErrorBinsPerDecade);
+    bin = b >= kBins - 1 || !std::isfinite(b) ? kBins - 1 : int(b);  // NaN: the last bin
+  }
+  ++counts[size_t(bin)];
+}
+
+void MapErrorHistogram::Merge(const MapErrorHistogram& other) {
+  if (other.counts.empty()) return;
+  if (counts.empty()) counts.assign(other.counts.size(), 0);
+  for (size_t k = 0; k < counts.size(); ++k) counts[k] += other.counts[k];
+}
+
+uint64_t MapErrorHistogram::Total() const {
+  uint64_t total = 0;
+  for (uint64_t c : counts) total += c;
+  return total;
+}
+
+std::optional<double> MapErrorHistogram::Quantile(double q) const {
+  const uint64_t total = Total();
+  if (total == 0) return std::nullopt;
+  // Nearest rank: the ceil(q n)-th smallest value (1-based), in [1, n]; (1 - 1e-12) as in
+  // NearestRankPercentile (0.99 x 100 must not round up to the next rank).
+  const uint64_t rank = std::clamp<uint64_t>(
+      uint64_t(std::ceil(q * double(total) * (1 - 1e-12))), 1, total);
+  uint64_t seen = 0;
+  for (size_t k = 0; k < counts.size(); ++k) {
+    seen += counts[k];
+    if (seen >= rank) return kMapErrorMin * std::pow(10.0, double(k + 1) / kMapErrorBinsPerDecade);
+  }
+  return kMapErrorMin * std::pow(10.0, double(kMapErrorDecades));
+}
+
 ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval_mask,
                       const Image* aux, const std::optional<NoiseModel>& noise,
                       const ScoreOptions& options) {
@@ -451,9 +489,11 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
     raw_px.pixels = scaled_px.pixels = 1;
     raw_px.values = scaled_px.values = 3;
     raw_px.ldr_values = scaled_px.ldr_values = ldr_values;
+    double abs_error = 0;
     for (int c = 0; c < 3; ++c) {
       const double p = photo.data[i * 3 + c], r = render.data[i * 3 + c];
       const double e = r - p, es = score.scale[c] * r - p;
+      abs_error += std::abs(e);
       raw_px.sse += e * e;
       raw_px.sse_over_peak2 += e * e / p2;
       raw_px.photo_sq += p * p;
@@ -469,6 +509,7 @@ ImageScore ScoreImage(const Image& photo, const Image& render, const Image& eval
         scaled_px.sse_ldr += els * els;
       }
     }
+    score.map_error.Add(abs_error / 3 / std::sqrt(p2));
     score.raw.Add(raw_px);
     score.scaled.Add(scaled_px);
     if (aux) {

@@ -148,6 +148,29 @@ std::optional<float> NearestRankPercentile(std::vector<float>* values, double fr
 // (nth_element; reorders *errors). nullopt when n = 0 or Σ errors is 0 or not finite.
 std::array<std::optional<double>, kWorstShareCount> WorstErrorShares(std::vector<float>* errors);
 
+// The error maps of the figures show |r - p| / P averaged over RGB ("map error"). All of a
+// report's maps share one colour scale, chosen from this error over every evaluated pixel of every
+// selected image: each image counts its pixels into a log-spaced histogram (integer counts, so the
+// pooled histogram, and the scale, do not depend on the thread count), and the pooled quantile is
+// read off it as the upper edge of the bin that holds it (never below the exact quantile; above it
+// by at most one bin, a factor 10^(1/kMapErrorBinsPerDecade)).
+// Bins: kMapErrorBinsPerDecade per decade over [kMapErrorMin, kMapErrorMin 10^kMapErrorDecades);
+// the first bin also holds smaller values (0 included), the last larger ones.
+constexpr int kMapErrorBinsPerDecade = 50;  // 4.7 % wide: finer than the 1-2-2.5-5 rounding after
+constexpr double kMapErrorMin = 1e-6;       // 1 ppm of the peak: below any photograph's noise
+constexpr int kMapErrorDecades = 8;         // up to 100x the peak: any render that is not garbage
+// The quantile of the map error that the shared scale covers (before rounding up, NiceCeil).
+constexpr double kMapErrorScaleQuantile = 0.99;
+
+struct MapErrorHistogram {
+  std::vector<uint64_t> counts;  // empty until the first Add
+  void Add(double map_error);
+  void Merge(const MapErrorHistogram& other);
+  uint64_t Total() const;
+  // Upper edge of the bin holding the nearest-rank q-quantile; nullopt when empty.
+  std::optional<double> Quantile(double q) const;
+};
+
 // One evaluated pixel of an image and its error, for the worst-pixels table.
 struct WorstPixel {
   int x = 0, y = 0;
@@ -174,6 +197,8 @@ struct ImageScore {
   std::vector<float> pixel_errors;
   // The (up to) kWorstPixelsListed pixels of largest error > 0, worst first (ties: row-major).
   std::vector<WorstPixel> worst_pixels;
+  // The map error of every evaluated pixel (always filled), for the shared error-map scale.
+  MapErrorHistogram map_error;
   // Figure data when requested (else empty): tone-mapped photograph and render (3 channels, the
   // whole image), and the error |r - p| / P averaged over channels (1 channel; -1 outside E).
   Image photo_tm, render_tm, error;

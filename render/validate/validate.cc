@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <mutex>
 #include <sstream>
 
@@ -57,6 +58,75 @@ std::string Fixed(const std::optional<double>& v, int digits) {
   char text[64];
   std::snprintf(text, sizeof text, "%.*f", digits, *v);
   return text;
+}
+
+// Fixed() without the HTML entity, for the text drawn into figures.
+std::string PlainFixed(const std::optional<double>& v, int digits) {
+  return v ? Fixed(v, digits) : "-";
+}
+
+// The legend of the shared error-map scale (REPORT/<this>), and its words (report, metrics.json).
+constexpr char kColourBarPng[] = "error_scale.png";
+constexpr char kColourMapText[] =
+    "viridis (dark purple = 0, yellow = the scale; larger errors saturate at yellow; dark grey = "
+    "not evaluated)";
+constexpr char kMapErrorText[] =
+    "|r - p| / peak, mean over RGB, per pixel (p photograph, r re-render, peak the photograph's "
+    "maximum over its evaluated pixels)";
+
+// The page's style: readable at any width, no external resource.
+constexpr char kReportCss[] =
+    "body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:0 auto;"
+    "padding:1em 2em 3em;max-width:1200px;color:#222;line-height:1.4}"
+    "h1{font-size:1.5em;margin:.4em 0 .2em}h2{font-size:1.25em;border-bottom:2px solid #ddd;"
+    "padding-bottom:.15em;margin-top:1.8em}h3{font-size:1.05em;margin:.6em 0 .3em}"
+    ".meta,.small{color:#555;font-size:.88em}code{word-break:break-all}nav{margin:.5em 0;"
+    "font-size:.92em}a{color:#1a5fb4}"
+    ".cards{display:flex;flex-wrap:wrap;gap:10px;margin:.8em 0}.card{border:1px solid #ccc;"
+    "border-radius:6px;padding:6px 12px;min-width:8.4em;background:#f7f7f7}"
+    ".card .k{font-size:.82em;color:#555}.card .v{font-size:1.6em;font-weight:600}"
+    ".card .s{font-size:.78em;color:#666}"
+    ".cols{display:flex;flex-wrap:wrap;gap:2em}.cols>div{flex:1 1 24em}"
+    "table{border-collapse:collapse;margin:.6em 0;font-size:.9em}td,th{border:1px solid #bbb;"
+    "padding:2px 8px;text-align:right}th{background:#eee}td:first-child{text-align:left}"
+    "table.kv td{text-align:left;vertical-align:top}"
+    "img{max-width:100%;image-rendering:pixelated}figure{margin:.8em 0}"
+    "figcaption{font-size:.88em;color:#333;margin-top:.2em}"
+    ".pair{display:flex;gap:6px;align-items:flex-start}.pair a.cmp{flex:3.4}.pair a.reg{flex:1}"
+    ".pair img{width:100%;display:block}.big .pair a.reg{flex:0 0 17%}"
+    ".grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(540px,1fr));gap:12px 20px}"
+    ".wide{overflow-x:auto}"
+    ".maps{display:grid;grid-template-columns:repeat(auto-fill,minmax(300px,1fr));gap:16px}"
+    ".maps img{width:100%}.legend img{width:min(100%,640px)}.note{color:#a60}";
+
+// One summary number: name, value, a line below.
+std::string Card(const std::string& name, const std::string& value, const std::string& below) {
+  return "<div class=card><div class=k>" + name + "</div><div class=v>" + value +
+         "</div><div class=s>" + below + "</div></div>\n";
+}
+
+// "converged 93.1 %, max_iterations 6.9 % of 1234 texels" (largest first); for clusters, their
+// number and the largest one's share. HTML.
+std::string CountsText(const std::map<long, size_t>& counts, const std::vector<std::string>& names,
+                       size_t texels, bool clusters) {
+  if (texels == 0) return "no texel";
+  std::vector<std::pair<long, size_t>> sorted(counts.begin(), counts.end());
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [](const auto& a, const auto& b) { return a.second > b.second; });
+  const auto percent = [&](size_t n) { return Fixed(100.0 * double(n) / double(texels), 1) + " %"; };
+  if (clusters) {
+    return std::to_string(sorted.size()) + " cluster" + (sorted.size() == 1 ? "" : "s") +
+           " over " + std::to_string(texels) + " texels (largest " +
+           percent(sorted.front().second) + ")";
+  }
+  std::string out;
+  for (const auto& [code, n] : sorted) {
+    const std::string name = code >= 0 && size_t(code) < names.size() && !names[size_t(code)].empty()
+                                 ? names[size_t(code)]
+                                 : "code " + std::to_string(code);
+    out += (out.empty() ? "" : ", ") + HtmlEscape(name) + " " + percent(n);
+  }
+  return out + " of " + std::to_string(texels) + " texels";
 }
 
 // A key usable as one file name: "raw/a" -> "raw_a".
@@ -113,8 +183,36 @@ struct Entry {
   bool has_aux = false;
   ImageScore score;
   size_t geometric_pixels = 0;
-  double p99_error = 0;
+  size_t rank = 0;  // by error, 1 = worst (largest MSE / peak^2, i.e. lowest PSNR)
 };
+
+// The caption of an image's comparison figure on the page (HTML).
+std::string FigureCaption(const Capture& capture, const Entry& e) {
+  const CaptureImage& image = capture.images[e.index];
+  char turntable[32];
+  std::snprintf(turntable, sizeof turntable, "%g", image.turntable_deg);
+  return "<b>#" + std::to_string(e.rank) + " " + HtmlEscape(image.file) + "</b> &middot; camera " +
+         HtmlEscape(capture.cameras[image.camera].id) + ", light " +
+         HtmlEscape(capture.lights[image.light].id) + ", turntable " + turntable +
+         "&deg; &middot; PSNR " + Fixed(e.score.raw.PsnrDb(), 2) + " dB, PSNR-L " +
+         Fixed(e.score.raw.PsnrLDb(), 2) + " dB, rel. RMSE " + Fixed(e.score.raw.RelRmse(), 4) +
+         ", SSIM " + Fixed(e.score.raw.Ssim(), 4);
+}
+
+// The comparison figure of an image and its region map beside it (when drawn), each a link to
+// itself: the browser shows it at full size, no script needed (HTML).
+std::string FigureImages(const Capture& capture, const Entry& e) {
+  const std::string file = HtmlEscape(capture.images[e.index].file);
+  const std::string png = "figures/" + HtmlEscape(e.key) + ".png";
+  std::string out = "<div class=pair><a class=cmp href=\"" + png + "\"><img src=\"" + png +
+                    "\" alt=\"photograph, re-render and error map of " + file + "\"></a>";
+  if (e.has_aux) {
+    const std::string regions = "figures/" + HtmlEscape(e.key) + "_regions.png";
+    out += "<a class=reg href=\"" + regions + "\"><img src=\"" + regions +
+           "\" alt=\"regions of " + file + "\"></a>";
+  }
+  return out + "</div>";
+}
 
 Json SumsJson(const ErrorSums& s, bool with_ssim) {
   Json j = {{"psnr_db", OrNull(s.PsnrDb())},
@@ -189,6 +287,14 @@ Json Definitions(const ValidateOptions& o) {
       {"noise_bound_psnr_db",
        "10 log10(peak^2 / mean variance), variance = photon_sigma_at_1^2 max(v, 0) + read_sigma^2 "
        "with v the render (noise-free estimate), from the capture's ground_truth.noise"},
+      {"error_map",
+       StrCat("figures' error maps: ", kMapErrorText, "; colour map ", kColourMapText,
+              "; one scale for all maps (figures.error_scale): given, or the ",
+              kMapErrorScaleQuantile, " quantile of this error over all evaluated pixels of all "
+              "selected images (log histogram, ", kMapErrorBinsPerDecade, " bins per decade, the "
+              "upper edge of the bin holding it) rounded up to 1, 2, 2.5 or 5 x 10^k")},
+      {"error_rank", "images ranked by MSE / peak^2 (lowest PSNR first), 1 = worst; ties keep "
+                     "image order; the worst (figures.worst_shown) always get figures"},
       {"overall", "pooled over all evaluated pixels of all selected images: squared errors divided "
                   "by their image's peak^2 are pooled for psnr_db (and variances for the bound), "
                   "sum (r - p)^2 and sum p^2 for rel_rmse, SSIM averaged over pixels; "
@@ -224,6 +330,62 @@ void FlattenJson(const Json& j, const std::string& prefix, int depth,
       rows->push_back({key, it->dump()});
     }
   }
+}
+
+// Reads the photograph, re-render, masks and aux buffers of `e` and scores them into e->score
+// (figure data too when keep_figure_data). *aux_problem receives why the image has no aux buffers
+// (then it has no region breakdown), else stays empty.
+Status ScoreEntry(const Capture& capture, const fs::path& renders_dir,
+                  const ValidateOptions& options, const std::optional<NoiseModel>& noise,
+                  bool keep_figure_data, Entry* entry, std::string* aux_problem) {
+  Entry& e = *entry;
+  const CaptureImage& image = capture.images[e.index];
+  REFLCAP_ASSIGN_OR_RETURN(Image photo, ReadImageRgb(capture.Resolve(image.file)));
+  REFLCAP_ASSIGN_OR_RETURN(Image render, ReadExrRgb(renders_dir / e.render));
+  REFLCAP_ASSIGN_OR_RETURN(Image render_mask, ReadPng(renders_dir / e.mask));
+  for (const auto& [name, img] : {std::pair<std::string, const Image*>{e.render, &render},
+                                  {e.mask, &render_mask}}) {
+    if (img->width != photo.width || img->height != photo.height) {
+      return InvalidArgumentError((renders_dir / name).string(), ": is ", img->width, "x",
+                                  img->height, " but the photograph ", image.file, " is ",
+                                  photo.width, "x", photo.height);
+    }
+  }
+  Image geometric = BinaryMask(render_mask);
+  if (auto path = CaptureMaskPath(capture, image)) {
+    REFLCAP_ASSIGN_OR_RETURN(Image capture_mask, ReadPng(*path));
+    if (capture_mask.width != photo.width || capture_mask.height != photo.height) {
+      return InvalidArgumentError(path->string(), ": is ", capture_mask.width, "x",
+                                  capture_mask.height, " but ", image.file, " is ",
+                                  photo.width, "x", photo.height);
+    }
+    const Image m = BinaryMask(capture_mask);
+    for (size_t p = 0; p < geometric.data.size(); ++p) geometric.data[p] *= m.data[p];
+  }
+  e.geometric_pixels = 0;
+  for (float v : geometric.data) e.geometric_pixels += v > 0.5f;
+  std::optional<Image> aux;
+  std::string problem;
+  std::error_code ec;
+  if (fs::is_regular_file(renders_dir / e.aux, ec)) {
+    aux = ReadAux(renders_dir / e.aux, &problem);
+    if (aux && (aux->width != photo.width || aux->height != photo.height)) {
+      problem = StrCat((renders_dir / e.aux).string(), ": wrong size");
+      aux.reset();
+    }
+  } else {
+    problem = StrCat((renders_dir / e.aux).string(), ": missing");
+  }
+  if (!aux) *aux_problem = problem;
+  e.has_aux = aux.has_value();
+  size_t excluded = 0;
+  const Image eval = EvaluationMask(geometric, photo, image.saturation,
+                                    options.score.erode_px, &excluded);
+  ScoreOptions score_options = options.score;
+  score_options.keep_figure_data = keep_figure_data;
+  e.score = ScoreImage(photo, render, eval, aux ? &*aux : nullptr, noise, score_options);
+  e.score.excluded_invalid = excluded;
+  return OkStatus();
 }
 
 }  // namespace
@@ -270,9 +432,12 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     return FailedPreconditionError(capture.json_path.string(), ": no image in split \"",
                                    render::SplitSelectionName(options.split), "\"");
   }
-  // Figures: evenly spaced over the selection when it has more images than the cap.
-  const size_t figure_count = std::min(entries.size(), size_t(options.max_figures));
-  for (size_t k = 0; k < figure_count; ++k) entries[k * entries.size() / figure_count].figure = true;
+  // Figures: the worst images (known after scoring; those not drawn yet are scored again for
+  // their figure data, below) and evenly spaced ones over the selection, at most the cap in all.
+  const size_t figure_cap = std::min(entries.size(), size_t(options.max_figures));
+  const size_t worst_shown = std::min(figure_cap, size_t(kWorstImagesShown));
+  const size_t spaced = figure_cap - worst_shown;
+  for (size_t k = 0; k < spaced; ++k) entries[k * entries.size() / spaced].figure = true;
 
   const std::optional<NoiseModel> noise = NoiseModelFromGroundTruth(capture.ground_truth_json);
   std::vector<Status> errors(entries.size());
@@ -282,76 +447,55 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   ParallelFor(0, int64_t(entries.size()), 1, [&](int64_t b, int64_t e_end, int) {
     for (int64_t k = b; k < e_end; ++k) {
       Entry& e = entries[size_t(k)];
-      const CaptureImage& image = capture.images[e.index];
-      auto run = [&]() -> Status {
-        REFLCAP_ASSIGN_OR_RETURN(Image photo, ReadImageRgb(capture.Resolve(image.file)));
-        REFLCAP_ASSIGN_OR_RETURN(Image render, ReadExrRgb(renders_dir / e.render));
-        REFLCAP_ASSIGN_OR_RETURN(Image render_mask, ReadPng(renders_dir / e.mask));
-        for (const auto& [name, img] : {std::pair<std::string, const Image*>{e.render, &render},
-                                        {e.mask, &render_mask}}) {
-          if (img->width != photo.width || img->height != photo.height) {
-            return InvalidArgumentError((renders_dir / name).string(), ": is ", img->width, "x",
-                                        img->height, " but the photograph ", image.file, " is ",
-                                        photo.width, "x", photo.height);
-          }
-        }
-        Image geometric = BinaryMask(render_mask);
-        if (auto path = CaptureMaskPath(capture, image)) {
-          REFLCAP_ASSIGN_OR_RETURN(Image capture_mask, ReadPng(*path));
-          if (capture_mask.width != photo.width || capture_mask.height != photo.height) {
-            return InvalidArgumentError(path->string(), ": is ", capture_mask.width, "x",
-                                        capture_mask.height, " but ", image.file, " is ",
-                                        photo.width, "x", photo.height);
-          }
-          const Image m = BinaryMask(capture_mask);
-          for (size_t p = 0; p < geometric.data.size(); ++p) geometric.data[p] *= m.data[p];
-        }
-        for (float v : geometric.data) e.geometric_pixels += v > 0.5f;
-        std::optional<Image> aux;
-        std::string problem;
-        std::error_code ec;
-        if (fs::is_regular_file(renders_dir / e.aux, ec)) {
-          aux = ReadAux(renders_dir / e.aux, &problem);
-          if (aux && (aux->width != photo.width || aux->height != photo.height)) {
-            problem = StrCat((renders_dir / e.aux).string(), ": wrong size");
-            aux.reset();
-          }
-        } else {
-          problem = StrCat((renders_dir / e.aux).string(), ": missing");
-        }
-        if (!aux) {
-          if (missing_aux++ == 0) {
-            std::lock_guard<std::mutex> lock(log_mutex);
-            REFLCAP_LOG(kWarning) << problem << "; no region breakdown for such images";
-          }
-        }
-        e.has_aux = aux.has_value();
-        size_t excluded = 0;
-        const Image eval = EvaluationMask(geometric, photo, image.saturation,
-                                          options.score.erode_px, &excluded);
-        ScoreOptions score_options = options.score;
-        score_options.keep_figure_data = e.figure;
-        e.score = ScoreImage(photo, render, eval, aux ? &*aux : nullptr, noise, score_options);
-        e.score.excluded_invalid = excluded;
-        if (e.figure) {
-          std::vector<float> errs;
-          for (float v : e.score.error.data) {
-            if (v >= 0) errs.push_back(v);
-          }
-          if (!errs.empty()) {
-            const size_t q = std::min(errs.size() - 1, size_t(0.99 * double(errs.size())));
-            std::nth_element(errs.begin(), errs.begin() + long(q), errs.end());
-            e.p99_error = errs[q];
-          }
-        }
-        return OkStatus();
-      };
-      errors[size_t(k)] = run();
+      std::string problem;
+      errors[size_t(k)] =
+          ScoreEntry(capture, renders_dir, options, noise, e.figure, &e, &problem);
+      if (!problem.empty() && missing_aux++ == 0) {
+        std::lock_guard<std::mutex> lock(log_mutex);
+        REFLCAP_LOG(kWarning) << problem << "; no region breakdown for such images";
+      }
       progress.Advance();
     }
   }, options.threads);
   progress.Finish();
   for (const Status& s : errors) REFLCAP_RETURN_IF_ERROR(s);
+  // Rank by error: MSE / peak^2 (what PSNR reads), largest first; ties keep image order.
+  std::vector<size_t> by_error(entries.size());
+  for (size_t n = 0; n < entries.size(); ++n) by_error[n] = n;
+  auto mse = [&](size_t n) {
+    const ErrorSums& r = entries[n].score.raw;
+    return r.values > 0 ? r.sse_over_peak2 / r.values : -1.0;  // nothing evaluated: last
+  };
+  std::stable_sort(by_error.begin(), by_error.end(),
+                   [&](size_t a, size_t b) { return mse(a) > mse(b); });
+  for (size_t k = 0; k < by_error.size(); ++k) entries[by_error[k]].rank = k + 1;
+  // The worst images get figures: score again those that were not drawn (same numbers, now with
+  // the figure data).
+  std::vector<size_t> rescore;
+  for (size_t k = 0; k < worst_shown; ++k) {
+    Entry& e = entries[by_error[k]];
+    if (!e.figure) rescore.push_back(by_error[k]);
+    e.figure = true;
+  }
+  std::vector<Status> rescore_errors(rescore.size());
+  ParallelFor(0, int64_t(rescore.size()), 1, [&](int64_t b, int64_t end, int) {
+    for (int64_t k = b; k < end; ++k) {
+      Entry& e = entries[rescore[size_t(k)]];
+      Entry again;
+      again.index = e.index;
+      again.render = e.render;
+      again.mask = e.mask;
+      again.aux = e.aux;
+      std::string problem;
+      rescore_errors[size_t(k)] =
+          ScoreEntry(capture, renders_dir, options, noise, true, &again, &problem);
+      e.score.photo_tm = std::move(again.score.photo_tm);
+      e.score.render_tm = std::move(again.score.render_tm);
+      e.score.error = std::move(again.score.error);
+      e.score.region_bits = std::move(again.score.region_bits);
+    }
+  }, options.threads);
+  for (const Status& s : rescore_errors) REFLCAP_RETURN_IF_ERROR(s);
   const double score_s = SecondsSince(start);
 
   // Aggregate.
@@ -407,6 +551,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
               {"light", capture.lights[image.light].id},
               {"turntable_deg", image.turntable_deg},
               {"split", SplitName(image.split)},
+              {"error_rank", e.rank},
               {"pixels", size_t(s.raw.pixels)},
               {"excluded_saturated_or_nonfinite", s.excluded_invalid},
               {"peak", s.peak},
@@ -480,19 +625,22 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                               {"read_sigma", noise->read_sigma}};
   }
 
-  // Figures.
+  // Figures. One colour scale for every error map: the pooled quantile of the map error over all
+  // evaluated pixels of all selected images (metrics.h), rounded up (NiceCeil), unless given.
   const auto figures_start = std::chrono::steady_clock::now();
   std::error_code ec;
   fs::create_directories(out_dir / "figures", ec);
   if (ec) return InternalError((out_dir / "figures").string(), ": cannot create: ", ec.message());
-  double error_scale = options.error_scale;
-  if (error_scale <= 0) {
-    double worst = 0;
-    for (const Entry& e : entries) {
-      if (e.figure) worst = std::max(worst, e.p99_error);
-    }
-    error_scale = NiceCeil(worst);
-  }
+  MapErrorHistogram pooled_map_error;
+  for (const Entry& e : entries) pooled_map_error.Merge(e.score.map_error);
+  const std::optional<double> map_error_quantile =
+      pooled_map_error.Quantile(kMapErrorScaleQuantile);
+  const bool scale_given = options.error_scale > 0;
+  const double error_scale =
+      scale_given ? options.error_scale : NiceCeil(map_error_quantile.value_or(0));
+  REFLCAP_RETURN_IF_ERROR(WritePng(
+      out_dir / kColourBarPng,
+      ComposeColourBar(error_scale, "ERROR = ABS(R - P) / PEAK, MEAN OVER RGB: ONE SCALE FOR ALL MAPS")));
   // Figures, composed and written in parallel (each from its own image's data).
   std::vector<const Entry*> figure_entries;
   for (const Entry& e : entries) {
@@ -505,8 +653,9 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       const CaptureImage& image = capture.images[e.index];
       char caption[256];
       std::snprintf(caption, sizeof caption, "%s  PSNR %s DB  REL RMSE %s  SSIM %s",
-                    image.file.c_str(), Fixed(e.score.raw.PsnrDb(), 2).c_str(),
-                    Fixed(e.score.raw.RelRmse(), 4).c_str(), Fixed(e.score.raw.Ssim(), 3).c_str());
+                    image.file.c_str(), PlainFixed(e.score.raw.PsnrDb(), 2).c_str(),
+                    PlainFixed(e.score.raw.RelRmse(), 4).c_str(),
+                    PlainFixed(e.score.raw.Ssim(), 3).c_str());
       const Image figure = ComposeFigure(e.score.photo_tm, e.score.render_tm, e.score.error,
                                          error_scale, caption);
       Status s = WritePng(out_dir / "figures" / (e.key + ".png"), figure);
@@ -521,8 +670,11 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   const size_t figures = figure_entries.size();
   const double figures_s = SecondsSince(figures_start);
 
-  // Fit and sample sections.
-  std::string fit_html, samples_html;
+  // Fit and sample sections: the summary's counts and speed, the maps, the report's fields.
+  // maps_html: <figure>s for the maps grid; maps_note: text above it.
+  std::string fit_summary_html, fit_fields_html, maps_html, maps_note, samples_html;
+  Json fit_timings;                               // fit_report.json timings_s / timings
+  std::optional<double> fits_per_second, texels_per_second;
   if (!options.fit_dir.empty()) {
     const fs::path report = options.fit_dir / "fit_report.json";
     const fs::path status = options.fit_dir / "status.exr";
@@ -533,11 +685,24 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       if (j.is_object()) {
         std::vector<std::pair<std::string, std::string>> rows;
         FlattenJson(j, "", 0, &rows);
-        fit_html += "<table><tr><th>field</th><th>value</th></tr>\n";
+        fit_fields_html += "<p>" + HtmlEscape(report.string()) + ":</p>\n"
+                           "<table><tr><th>field</th><th>value</th></tr>\n";
         for (const auto& [k, v] : rows) {
-          fit_html += "<tr><td>" + HtmlEscape(k) + "</td><td>" + HtmlEscape(v) + "</td></tr>\n";
+          fit_fields_html +=
+              "<tr><td>" + HtmlEscape(k) + "</td><td>" + HtmlEscape(v) + "</td></tr>\n";
         }
-        fit_html += "</table>\n";
+        fit_fields_html += "</table>\n";
+        for (const char* key : {"timings_s", "timings"}) {
+          if (auto it = j.find(key); it != j.end() && it->is_object() && fit_timings.is_null()) {
+            fit_timings = *it;
+          }
+        }
+        if (auto it = j.find("fits_per_second"); it != j.end() && it->is_number()) {
+          fits_per_second = it->get<double>();
+        }
+        if (auto it = j.find("texels_per_second"); it != j.end() && it->is_number()) {
+          texels_per_second = it->get<double>();
+        }
         if (auto it = j.find("model_names"); it != j.end() && it->is_array()) {
           for (const auto& n : *it) model_names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
         }
@@ -555,10 +720,11 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
           }
         }
       } else {
-        fit_html += "<p class=note>" + HtmlEscape(report.string()) + ": not valid JSON.</p>\n";
+        fit_fields_html += "<p class=note>" + HtmlEscape(report.string()) + ": not valid JSON.</p>\n";
       }
     } else {
-      fit_html += "<p class=note>No fit summary: " + HtmlEscape(report.string()) + " is absent.</p>\n";
+      fit_fields_html +=
+          "<p class=note>No fit summary: " + HtmlEscape(report.string()) + " is absent.</p>\n";
     }
     std::vector<std::string> channel_names;
     auto codes = ReadExrChannels(status, &channel_names);
@@ -566,14 +732,19 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       // One categorical map per channel the fit wrote: its status, the model each texel ended
       // with, and its material cluster (older FIT folders lack the last two: skipped).
       struct Map {
-        std::string channel, png, title;
+        std::string channel, png, title, summary;
         std::vector<std::string> names;
       };
       std::vector<std::string> cluster_names;
       const std::vector<Map> maps = {
-          {"status", "status.png", "Fit status per texel", status_names},
-          {"model", "model.png", "Model per texel (what its parameters are)", model_names},
-          {"material_cluster", "clusters.png", "Material cluster per texel", cluster_names}};
+          {"model", "model.png", "Model per texel (what its parameters are)", "models", model_names},
+          {"material_cluster", "clusters.png", "Material cluster per texel", "clusters",
+           cluster_names},
+          {"status", "status.png", "Fit status per texel", "status", status_names}};
+      maps_note += "<p>From <code>" + HtmlEscape(status.string()) +
+                   "</code>, in atlas layout (one pixel per texel); each colour's code, name and "
+                   "texel count are in the legend below its map; black = no texel (negative or "
+                   "non-finite code).</p>\n";
       for (const Map& map : maps) {
         int channel = -1;
         for (size_t k = 0; k < channel_names.size(); ++k) {
@@ -584,20 +755,33 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
         if (channel < 0) continue;
         Image one(codes->width, codes->height, 1);
         Image valid(codes->width, codes->height, 1);
+        std::map<long, size_t> counts;
+        size_t texels = 0;
         for (size_t p = 0; p < one.PixelCount(); ++p) {
           const float v = codes->data[p * codes->channels + size_t(channel)];
           one.data[p] = v;
-          valid.data[p] = std::isfinite(v) && v >= 0 ? 1.0f : 0.0f;
+          const bool ok = std::isfinite(v) && v >= 0;
+          valid.data[p] = ok ? 1.0f : 0.0f;
+          if (ok) ++counts[std::lround(v)], ++texels;
+        }
+        std::vector<std::string> names = map.names;
+        // Clusters have no names: "cluster k" (when the codes are of a sane size).
+        constexpr long kMaxNamedCluster = 1 << 16;
+        if (map.channel == "material_cluster" && !counts.empty() &&
+            counts.rbegin()->first < kMaxNamedCluster) {
+          for (long k = 0; k <= counts.rbegin()->first; ++k) names.push_back("cluster " + std::to_string(k));
         }
         REFLCAP_RETURN_IF_ERROR(
-            WritePng(out_dir / map.png, ComposeCategoricalMap(one, &valid, map.names)));
-        fit_html += "<h3>" + map.title + "</h3><p>" + HtmlEscape(status.string()) + " channel " +
-                    map.channel +
-                    " in atlas layout; black = no texel (negative or non-finite code).</p>"
-                    "<img src=\"" + map.png + "\" alt=\"" + map.title + "\">\n";
+            WritePng(out_dir / map.png, ComposeCategoricalMap(one, &valid, names)));
+        maps_html += "<figure><figcaption><b>" + HtmlEscape(map.title) + "</b> (channel " +
+                     HtmlEscape(map.channel) + ")</figcaption><img src=\"" + HtmlEscape(map.png) +
+                     "\" alt=\"" + HtmlEscape(map.title) + "\"></figure>\n";
+        fit_summary_html += "<tr><td>" + HtmlEscape(map.summary) + "</td><td>" +
+                            CountsText(counts, map.names, texels, map.channel == "material_cluster") +
+                            "</td></tr>\n";
       }
     } else {
-      fit_html += "<p class=note>No status map: " + HtmlEscape(codes.status().message()) + "</p>\n";
+      maps_note += "<p class=note>No status map: " + HtmlEscape(codes.status().message()) + "</p>\n";
     }
   }
   if (!options.samples_dir.empty()) {
@@ -605,9 +789,9 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     if (fs::is_regular_file(coverage, ec)) {
       fs::copy_file(coverage, out_dir / "coverage.png", fs::copy_options::overwrite_existing, ec);
       if (ec) return InternalError(coverage.string(), ": cannot copy: ", ec.message());
-      samples_html = "<p>" + HtmlEscape(coverage.string()) +
-                     " (samples per texel, from the resampler):</p>"
-                     "<img src=\"coverage.png\" alt=\"sample coverage map\">\n";
+      samples_html = "<figure><figcaption><b>Sample coverage</b>: samples per texel, from the "
+                     "resampler (<code>" + HtmlEscape(coverage.string()) + "</code>)</figcaption>"
+                     "<img src=\"coverage.png\" alt=\"sample coverage map\"></figure>\n";
     } else {
       samples_html = "<p class=note>No coverage map: " + HtmlEscape(coverage.string()) +
                      " is absent.</p>\n";
@@ -617,6 +801,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   const double total_s = SecondsSince(start);
   Json timings = {{"score_s", score_s}, {"figures_s", figures_s}, {"total_s", total_s}};
   std::string render_timings;  // table rows
+  std::string render_speed;    // summary cell
   if (auto text = ReadTextFile(renders_dir / "render_report.json"); text.ok()) {
     const Json j = Json::parse(*text, nullptr, false);
     if (j.is_object() && j.contains("timings") && j["timings"].is_object()) {
@@ -626,35 +811,175 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
         if (!it->is_number()) continue;
         render_timings += "<tr><td>render (" + HtmlEscape(device) + "): " + HtmlEscape(it.key()) +
                           "</td><td>" + Fixed(it->get<double>(), 2) + "</td></tr>\n";
+        render_speed += (render_speed.empty() ? "" : ", ") + HtmlEscape(it.key()) + " " +
+                        Fixed(it->get<double>(), 2);
       }
+      if (!render_speed.empty()) render_speed = HtmlEscape(device) + ": " + render_speed;
     }
   }
+  Json worst_files = Json::array();
+  for (size_t k = 0; k < worst_shown; ++k) worst_files.push_back(capture.images[entries[by_error[k]].index].file);
   Json metrics = {{"capture", capture.json_path.string()},
                   {"renders", renders_dir.string()},
                   {"split", render::SplitSelectionName(options.split)},
                   {"definitions", Definitions(options)},
                   {"figures", {{"count", figures},
                                {"cap", options.max_figures},
-                               {"error_scale_fraction_of_peak", error_scale}}},
+                               {"error_scale_fraction_of_peak", error_scale},
+                               {"error_scale",
+                                {{"fraction_of_peak", error_scale},
+                                 {"source", scale_given ? "given (--error-scale)" : "automatic"},
+                                 {"quantile", kMapErrorScaleQuantile},
+                                 {"pooled_quantile_fraction_of_peak", OrNull(map_error_quantile)},
+                                 {"legend", kColourBarPng},
+                                 {"colour_map", kColourMapText},
+                                 {"quantity", kMapErrorText}}},
+                               {"worst_shown", worst_files}}},
                   {"images", images},
                   {"overall", overall},
                   {"timings", timings}};
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "metrics.json", metrics.dump(2) + "\n"));
 
-  // report.html
+  // report.html: what a reader wants first (the numbers, the worst images, the maps), the tables
+  // after. Every text from the inputs goes through HtmlEscape; paths as given.
+  const std::string split_name = render::SplitSelectionName(options.split);
   std::ostringstream html;
   html << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
        << "<title>reflcap validation: " << HtmlEscape(capture.json_path.string()) << "</title>\n"
-       << "<style>body{font-family:sans-serif;margin:2em;max-width:80em}"
-          "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;"
-          "padding:2px 8px;text-align:right}th{background:#eee}td:first-child{text-align:left}"
-          "img{max-width:100%;image-rendering:pixelated}.note{color:#a60}</style>\n"
-       << "</head>\n<body>\n<h1>Validation renders</h1>\n"
-       << "<p>Capture <code>" << HtmlEscape(capture.json_path.string()) << "</code>, renders <code>"
-       << HtmlEscape(renders_dir.string()) << "</code>, split <b>"
-       << render::SplitSelectionName(options.split) << "</b>: " << entries.size() << " images, "
-       << size_t(raw.pixels) << " evaluated pixels.</p>\n";
-  html << "<h2>Summary</h2>\n<table><tr><th></th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
+       << "<style>" << kReportCss << "</style>\n"
+       << "</head>\n<body>\n<h1>Validation: re-renders against " << HtmlEscape(split_name)
+       << " photographs</h1>\n"
+       << "<p class=meta>Capture <code>" << HtmlEscape(capture.json_path.string())
+       << "</code> &middot; renders <code>" << HtmlEscape(renders_dir.string()) << "</code>";
+  if (!options.fit_dir.empty()) html << " &middot; fit <code>" << HtmlEscape(options.fit_dir.string()) << "</code>";
+  html << "</p>\n<nav><a href=\"#summary\">Summary</a> &middot; <a href=\"#worst\">Worst images</a>"
+          " &middot; <a href=\"#figures\">More figures</a> &middot; <a href=\"#maps\">Fit maps</a>"
+          " &middot; <a href=\"#tables\">Tables</a></nav>\n";
+
+  // Summary.
+  const std::optional<double> bound = noise ? raw.NoiseBoundDb() : std::nullopt;
+  html << "<section id=\"summary\">\n<h2>Summary</h2>\n<div class=cards>\n"
+       << Card("PSNR", Fixed(raw.PsnrDb(), 2) + " dB",
+               "LS-scaled " + Fixed(scaled.PsnrDb(), 2) + " dB")
+       << Card("PSNR-L", Fixed(raw.PsnrLDb(), 2) + " dB",
+               "LS-scaled " + Fixed(scaled.PsnrLDb(), 2) + " dB")
+       << Card("relative RMSE", Fixed(raw.RelRmse(), 4), "LS-scaled " + Fixed(scaled.RelRmse(), 4))
+       << Card("SSIM", Fixed(raw.Ssim(), 4), "LS-scaled " + Fixed(scaled.Ssim(), 4));
+  if (noise) {
+    html << Card("noise bound", Fixed(bound, 2) + " dB",
+                 "PSNR &minus; bound = " +
+                     Fixed(raw.PsnrDb() && bound ? std::optional<double>(*raw.PsnrDb() - *bound)
+                                                 : std::nullopt,
+                           2) +
+                     " dB");
+  }
+  html << Card("images compared", std::to_string(entries.size()),
+               std::to_string(size_t(raw.pixels)) + " evaluated pixels")
+       << "</div>\n<p class=small>Pooled over all evaluated pixels of the " << entries.size()
+       << " " << HtmlEscape(split_name) << " images. PSNR relative to each photograph's peak; "
+          "PSNR-L: Stanford-ORB's LDR PSNR; LS-scaled: the render scaled per channel by least "
+          "squares first (removes a global exposure/albedo scale). ";
+  if (noise) {
+    html << "Noise bound: the PSNR a perfect re-render scores under the capture's noise model "
+            "(photon &sigma; " << noise->photon_sigma_at_1 << " at 1, read &sigma; "
+         << noise->read_sigma << ").";
+  } else {
+    html << "No noise model in the capture (ground_truth.noise): no noise bound.";
+  }
+  html << " Worst 0.1 % of pixels carry " << Share(worst_share[0])
+       << " of the squared error, worst 1 % " << Share(worst_share[1]) << ".</p>\n";
+  html << "<div class=cols>\n";
+  if (!options.fit_dir.empty()) {
+    html << "<div><h3>Fit</h3>\n"
+         << (fit_summary_html.empty()
+                 ? "<p class=note>No model/status map in the fit folder.</p>\n"
+                 : "<table class=kv>\n" + fit_summary_html + "</table>\n")
+         << "</div>\n";
+  }
+  html << "<div><h3>Speed</h3>\n<table class=kv>\n";
+  if (!options.fit_dir.empty()) {
+    std::string fit_cell;
+    if (fit_timings.is_object()) {
+      for (const char* key : {"total", "total_s"}) {
+        if (auto it = fit_timings.find(key); it != fit_timings.end() && it->is_number()) {
+          fit_cell = Fixed(it->get<double>(), 2) + " s total";
+        }
+      }
+      if (auto it = fit_timings.find("fit"); it != fit_timings.end() && it->is_number()) {
+        fit_cell += (fit_cell.empty() ? "" : ", ") + Fixed(it->get<double>(), 2) + " s fitting";
+      }
+    }
+    if (fits_per_second) fit_cell += (fit_cell.empty() ? "" : ", ") + Fixed(fits_per_second, 0) + " fits/s";
+    if (texels_per_second) {
+      fit_cell += (fit_cell.empty() ? "" : ", ") + Fixed(texels_per_second, 0) + " texels/s";
+    }
+    html << "<tr><td>fit</td><td>" << (fit_cell.empty() ? "&ndash;" : fit_cell) << "</td></tr>\n";
+  }
+  html << "<tr><td>render</td><td>"
+       << (render_speed.empty() ? "&ndash; (no render_report.json)" : render_speed + " s")
+       << "</td></tr>\n<tr><td>validate</td><td>" << Fixed(total_s, 2) << " s ("
+       << Fixed(score_s, 2) << " s scoring, " << Fixed(figures_s, 2)
+       << " s figures)</td></tr>\n</table>\n</div>\n</div>\n</section>\n";
+
+  // The error scale's legend, shown with the worst images and again with all figures.
+  std::ostringstream legend;
+  legend << "<div class=legend><img src=\"" << kColourBarPng << "\" alt=\"error colour scale: 0 to "
+         << FormatPercent(error_scale) << " of the peak\"><p class=small>Error maps: "
+         << kMapErrorText << ", colour map " << kColourMapText << ". <b>One scale for all error "
+         << "maps on this page: 0 to " << FormatPercent(error_scale) << " of the peak</b> ("
+         << (scale_given ? std::string("given with --error-scale")
+                         : "the " + Fixed(100 * kMapErrorScaleQuantile, 0) +
+                               "th percentile over all evaluated pixels of all images, " +
+                               (map_error_quantile ? FormatPercent(*map_error_quantile) : "&ndash;") +
+                               ", rounded up to 1, 2, 2.5 or 5 &times; 10<sup>k</sup>")
+         << "). Photograph and re-render are tone-mapped alike: x/(1+x) after dividing by the "
+            "photograph's mean over the evaluated pixels, then gamma 1/2.2.</p></div>\n";
+
+  // Worst images, large.
+  html << "<section id=\"worst\">\n<h2>Worst " << HtmlEscape(split_name) << " images</h2>\n";
+  if (worst_shown == 0) {
+    html << "<p class=note>No figures (--max-figures 0).</p>\n";
+  } else {
+    html << "<p>The " << worst_shown << " images of largest error (lowest PSNR) of "
+         << entries.size() << ", worst first: photograph | re-render | error map.</p>\n"
+         << legend.str();
+    for (size_t k = 0; k < worst_shown; ++k) {
+      const Entry& e = entries[by_error[k]];
+      if (e.score.photo_tm.empty()) continue;
+      html << "<figure class=big id=\"" << HtmlEscape(e.key) << "\">" << FigureImages(capture, e)
+           << "<figcaption>" << FigureCaption(capture, e) << "</figcaption></figure>\n";
+    }
+  }
+  html << "</section>\n";
+
+  // The other figures, worst first, smaller.
+  html << "<section id=\"figures\">\n<h2>More comparison figures</h2>\n<p>" << figures << " of "
+       << entries.size() << " images have figures (at most " << options.max_figures << ": the "
+       << worst_shown << " worst, above, and the rest evenly spaced over the images); here the "
+       << (figures > worst_shown ? figures - worst_shown : 0)
+       << " others, worst first, on the same colour scale (0 to " << FormatPercent(error_scale)
+       << " of the peak), each beside its region labels where the renders have aux buffers "
+          "(shadow edge red, high curvature blue, grazing yellow). Click an image for its full "
+          "size.</p>\n<div class=grid>\n";
+  for (size_t k = worst_shown; k < by_error.size(); ++k) {
+    const Entry& e = entries[by_error[k]];
+    if (!e.figure || e.score.photo_tm.empty()) continue;
+    html << "<figure id=\"" << HtmlEscape(e.key) << "\">" << FigureImages(capture, e)
+         << "<figcaption>" << FigureCaption(capture, e) << "</figcaption></figure>\n";
+  }
+  html << "</div>\n</section>\n";
+
+  // Maps.
+  html << "<section id=\"maps\">\n<h2>Fit maps</h2>\n"
+       << (options.fit_dir.empty() ? "<p class=note>No fit folder given (--fit FIT).</p>\n"
+                                   : maps_note)
+       << (options.samples_dir.empty()
+               ? "<p class=note>No sample store given (--samples SAMPLES): no coverage map.</p>\n"
+               : "")
+       << "<div class=maps>\n" << maps_html << samples_html << "</div>\n</section>\n";
+
+  // Tables.
+  html << "<section id=\"tables\">\n<h2>Metrics</h2>\n<table><tr><th></th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
           "<th>rel. RMSE</th><th>SSIM</th></tr>\n<tr><td>raw, pooled</td>"
        << MetricCells(raw) << "</tr>\n<tr><td>LS-scaled (Stanford-ORB), pooled</td>"
        << MetricCells(scaled) << "</tr>\n<tr><td>raw, mean over images</td><td>"
@@ -679,8 +1004,6 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                       : std::nullopt,
                   2)
          << " dB from it.</p>\n";
-  } else {
-    html << "<p class=note>No noise model in the capture (ground_truth.noise): no noise bound.</p>\n";
   }
   html << "<h2>Where the error is</h2>\n";
   if (all_regions) {
@@ -709,7 +1032,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   } else {
     html << "<p class=note>Some renders have no aux buffers: no region breakdown.</p>\n";
   }
-  html << "<h2>Per image</h2>\n<table><tr><th>file</th><th>camera</th><th>light</th>"
+  html << "<h2>Per image</h2>\n<p>In capture order; rank 1 = the largest error (lowest PSNR).</p>\n"
+          "<div class=wide><table><tr><th>file</th><th>rank</th><th>camera</th><th>light</th>"
           "<th>turntable (&deg;)</th><th>pixels</th><th>PSNR (dB)</th><th>PSNR-L (dB)</th>"
           "<th>rel. RMSE</th><th>SSIM</th><th>scaled PSNR</th><th>scaled PSNR-L</th>"
           "<th>scaled rel. RMSE</th><th>scaled SSIM</th><th>worst 0.1 % share</th>"
@@ -717,15 +1041,15 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   for (const Entry& e : entries) {
     const CaptureImage& image = capture.images[e.index];
     html << "<tr><td>" << (e.figure ? "<a href=\"#" + HtmlEscape(e.key) + "\">" : "")
-         << HtmlEscape(image.file) << (e.figure ? "</a>" : "") << "</td><td>"
-         << HtmlEscape(capture.cameras[image.camera].id) << "</td><td>"
+         << HtmlEscape(image.file) << (e.figure ? "</a>" : "") << "</td><td>" << e.rank
+         << "</td><td>" << HtmlEscape(capture.cameras[image.camera].id) << "</td><td>"
          << HtmlEscape(capture.lights[image.light].id) << "</td><td>" << image.turntable_deg
          << "</td><td>" << size_t(e.score.raw.pixels) << "</td>" << MetricCells(e.score.raw)
          << MetricCells(e.score.scaled) << "<td>" << Share(e.score.worst_share[0]) << "</td>";
     if (noise) html << "<td>" << Fixed(e.score.raw.NoiseBoundDb(), 2) << "</td>";
     html << "</tr>\n";
   }
-  html << "</table>\n<h2>Worst pixels</h2>\n";
+  html << "</table></div>\n<h2>Worst pixels</h2>\n";
   if (worst_pixels.empty()) {
     html << "<p class=note>No evaluated pixel has an error.</p>\n";
   } else {
@@ -749,34 +1073,15 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     }
     html << "</table>\n";
   }
-  html << "<h2>Figures</h2>\n<p>Photograph | re-render | error |r &minus; p| / peak "
-          "(mean over RGB; colour bar in % of the photograph's peak, "
-       << FormatPercent(error_scale) << " at the top; grey = not evaluated). Tone map: x/(1+x) "
-          "after dividing by the photograph's mean over the evaluated pixels, then gamma 1/2.2, "
-          "the same for both images. "
-       << figures << " of " << entries.size() << " images (at most " << options.max_figures
-       << ", evenly spaced).</p>\n";
-  for (const Entry& e : entries) {
-    if (!e.figure) continue;
-    html << "<h3 id=\"" << HtmlEscape(e.key) << "\">" << HtmlEscape(capture.images[e.index].file)
-         << "</h3>\n<img src=\"figures/" << HtmlEscape(e.key) << ".png\" alt=\"comparison\">\n";
-    if (e.has_aux) {
-      html << "<br><img src=\"figures/" << HtmlEscape(e.key)
-           << "_regions.png\" alt=\"regions\">\n";
-    }
-  }
-  html << "<h2>Fit</h2>\n"
-       << (options.fit_dir.empty() ? "<p class=note>No fit folder given (--fit FIT).</p>\n" : fit_html)
-       << "<h2>Sample coverage</h2>\n"
-       << (options.samples_dir.empty()
-               ? "<p class=note>No sample store given (--samples SAMPLES).</p>\n"
-               : samples_html)
+  html << "<h2>Fit report</h2>\n"
+       << (options.fit_dir.empty() ? "<p class=note>No fit folder given (--fit FIT).</p>\n"
+                                   : fit_fields_html)
        << "<h2>Timings</h2>\n<table><tr><th>stage</th><th>seconds</th></tr>\n"
        << "<tr><td>load and score</td><td>" << Fixed(score_s, 2) << "</td></tr>\n"
        << "<tr><td>figures</td><td>" << Fixed(figures_s, 2) << "</td></tr>\n"
        << "<tr><td>validate total</td><td>" << Fixed(total_s, 2) << "</td></tr>\n"
-       << render_timings << "</table>\n";
-  html << "<p>Definitions: see metrics.json <code>definitions</code> and README.md "
+       << render_timings << "</table>\n</section>\n";
+  html << "<p class=small>Definitions: see metrics.json <code>definitions</code> and README.md "
           "(reflcap validate).</p>\n</body>\n</html>\n";
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "report.html", html.str()));
 

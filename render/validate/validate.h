@@ -9,10 +9,14 @@
 //   metrics.json              images (per-image metrics), overall (pooled + per-image mean,
 //                             worst pixels), capture, renders, split, definitions, timings
 //   figures/<key>.png         photograph | re-render | error heat map, for up to max_figures
-//                             images (evenly spaced over the selection when there are more)
+//                             images: the kWorstImagesShown worst, the rest evenly spaced over
+//                             the selection; every error map on one colour scale
 //   figures/<key>_regions.png the region labels of that image
-//   status.png, coverage.png  fit status map with legend, sample coverage (when given and present)
-//   report.html               everything above on one page (relative links)
+//   error_scale.png           the legend of that shared scale
+//   status.png, model.png, clusters.png, coverage.png
+//                             fit maps with legends, sample coverage (when given and present)
+//   report.html               everything above on one page (relative links): summary, worst
+//                             images large, all figures, maps, then the tables
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -27,14 +31,18 @@ namespace reflcap::validate {
 // Figures written at most, by default: enough to see every camera/light family of a holdout split,
 // few enough to keep a report's page light (each figure is ~3x an image).
 constexpr int kDefaultMaxFigures = 24;
+// The worst images (by PSNR) always drawn, first and large on the page, within max_figures: a
+// reader looks at where the model fails before the typical views.
+constexpr int kWorstImagesShown = 4;
 
 struct ValidateOptions {
   render::SplitSelection split = render::SplitSelection::kHoldout;
   std::filesystem::path fit_dir;      // empty: no fit section
   std::filesystem::path samples_dir;  // empty: no coverage section
   int max_figures = kDefaultMaxFigures;  // >= 0
-  // Error heat-map range as a fraction of the peak; 0 = automatic: the 99th percentile of the error
-  // over the figure images, rounded up to 1, 2, 2.5 or 5 x 10^k, shared by all figures.
+  // Error heat-map range as a fraction of the peak, shared by all figures; 0 = automatic: the 99th
+  // percentile of the map error over all evaluated pixels of all selected images (metrics.h),
+  // rounded up to 1, 2, 2.5 or 5 x 10^k.
   double error_scale = 0;
   ScoreOptions score;
   // Threads scoring images (each image reads its files and is scored on one thread) and writing

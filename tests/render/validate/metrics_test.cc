@@ -179,6 +179,91 @@ TEST(Figures, ComposeFigureDrawsThreePanelsAndAColourBar) {
   EXPECT_GT(Viridis(1)[1], 0.85f);
 }
 
+TEST(Figures, TheSameErrorGetsTheSameColourInEveryFigureOfOneScale) {
+  // Two images whose errors differ 10x, drawn on one scale: a pixel's colour depends on its error
+  // and the scale only (not on the image's own error range), and the colour bars are the same.
+  const int size = 32;
+  const double scale = 0.05;
+  Image photo(size, size, 3, 0.5f), render(size, size, 3, 0.25f);
+  Image small(size, size, 1, 0.004f), large(size, size, 1, 0.04f);
+  small.at(3, 4) = large.at(3, 4) = 0.025f;  // the same error in both
+  const Image a = ComposeFigure(photo, render, small, scale, "A");
+  const Image b = ComposeFigure(photo, render, large, scale, "B");
+  ASSERT_EQ(a.width, b.width);
+  ASSERT_EQ(a.height, b.height);
+  // Panel geometry of ComposeFigure at this size (font scale 1): pad 4, title 7 + 2 pad.
+  const int pad = 4, title_h = kGlyphHeight + 2 * pad, ex = 3 * pad + 2 * size;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_EQ(a.at(ex + 3, title_h + 4, c), b.at(ex + 3, title_h + 4, c));
+    EXPECT_FLOAT_EQ(a.at(ex + 3, title_h + 4, c), Viridis(0.025 / scale)[c]);
+    EXPECT_FLOAT_EQ(a.at(ex, title_h, c), Viridis(0.004 / scale)[c]);
+    EXPECT_FLOAT_EQ(b.at(ex, title_h, c), Viridis(0.04 / scale)[c]);
+  }
+  // Everything right of the error panel (colour bar and its labels) is the same in both.
+  for (int y = 0; y < a.height - (kGlyphHeight + 2 * pad); ++y) {
+    for (int x = ex + size; x < a.width; ++x) {
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(a.at(x, y, c), b.at(x, y, c)) << x << "," << y;
+    }
+  }
+}
+
+TEST(Figures, ColourBarLegendRunsFromZeroToTheScale) {
+  const Image bar = ComposeColourBar(0.05, "TITLE");
+  EXPECT_GE(bar.width, 512);
+  // The bar's row: its leftmost coloured pixel is Viridis(0), its rightmost Viridis(1).
+  int row = -1;
+  for (int y = 0; y < bar.height && row < 0; ++y) {
+    for (int x = 0; x < bar.width; ++x) {
+      if (bar.at(x, y, 0) == Viridis(1)[0] && bar.at(x, y, 1) == Viridis(1)[1]) row = y;
+    }
+  }
+  ASSERT_GE(row, 0);
+  int first = -1, last = -1;
+  for (int x = 0; x < bar.width; ++x) {
+    if (bar.at(x, row, 0) == Viridis(0)[0] && bar.at(x, row, 2) == Viridis(0)[2] && first < 0) first = x;
+    if (bar.at(x, row, 0) == Viridis(1)[0] && bar.at(x, row, 1) == Viridis(1)[1]) last = x;
+  }
+  ASSERT_GE(first, 0);
+  EXPECT_EQ(last - first + 1, 512);
+  // Round tick steps for NiceCeil's scales: 2.5 % in 0.5 % steps, 2 % in 0.5 % steps.
+  EXPECT_EQ(ColourBarTicks(0.025), 6);
+  EXPECT_EQ(ColourBarTicks(0.05), 6);
+  EXPECT_EQ(ColourBarTicks(0.02), 5);
+  EXPECT_EQ(ColourBarTicks(0.1), 5);
+  EXPECT_EQ(ColourBarTicks(0.037), 5);
+}
+
+TEST(Metrics, MapErrorHistogramQuantileBracketsTheExactOne) {
+  // The pooled quantile read off the histogram is the upper edge of the bin that holds the exact
+  // nearest-rank quantile: not below it, and above it by less than one bin's factor.
+  const double bin_factor = std::pow(10.0, 1.0 / kMapErrorBinsPerDecade);
+  std::mt19937 rng(7);
+  std::lognormal_distribution<double> dist(std::log(0.01), 1.0);
+  MapErrorHistogram a, b;
+  std::vector<float> all;
+  for (int k = 0; k < 20000; ++k) {
+    const double v = dist(rng);
+    (k % 3 ? a : b).Add(v);
+    all.push_back(float(v));
+  }
+  MapErrorHistogram pooled;
+  pooled.Merge(a);
+  pooled.Merge(b);
+  EXPECT_EQ(pooled.Total(), 20000u);
+  const std::optional<double> q = pooled.Quantile(kMapErrorScaleQuantile);
+  const std::optional<float> exact = NearestRankPercentile(&all, kMapErrorScaleQuantile);
+  ASSERT_TRUE(q && exact);
+  // The exact quantile is of the values rounded to float (relative error 6e-8): margin 1e-6.
+  constexpr double kFloatRoundingRel = 1e-6;
+  EXPECT_GE(*q, *exact * (1 - kFloatRoundingRel));
+  EXPECT_LT(*q, *exact * bin_factor * (1 + kFloatRoundingRel));
+  // Zero errors land in the first bin; an empty histogram has no quantile.
+  MapErrorHistogram zeros;
+  zeros.Add(0);
+  EXPECT_DOUBLE_EQ(*zeros.Quantile(0.99), kMapErrorMin * bin_factor);
+  EXPECT_FALSE(MapErrorHistogram().Quantile(0.99).has_value());
+}
+
 }  // namespace
 }  // namespace reflcap::validate
 

@@ -15,8 +15,10 @@
 #include "acquire/synth/synth.h"
 #include "engine/core/atomic_file.h"
 #include "engine/image/exr_io.h"
+#include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
 #include "render/reference/render_capture.h"
+#include "render/validate/figures.h"
 #include "tests/support/test_support.h"
 
 namespace reflcap::validate {
@@ -262,7 +264,8 @@ TEST(Validate, ReportShowsTheModelAndClusterMapsTheFitWrote) {
   ASSERT_TRUE(capture.ok());
   ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
   testing::WriteText(dir / "fit/fit_report.json",
-                     R"({"model_names": ["lambert_lobe_absent", "lambert_no_evidence", "own_lobe"]})");
+                     R"({"model_names": ["lambert_lobe_absent", "lambert_no_evidence", "own_lobe"],
+                         "fits_per_second": 1234.4, "timings_s": {"fit": 2.5, "total": 3.25}})");
   // Channels as the fitter writes them (status.exr): status, model, material_cluster.
   Image maps(20, 10, 3, -1.0f);
   for (int x = 0; x < 10; ++x) {
@@ -282,6 +285,140 @@ TEST(Validate, ReportShowsTheModelAndClusterMapsTheFitWrote) {
   const std::string html = ReadTextFile(dir / "report/report.html").value();
   EXPECT_NE(html.find("<img src=\"model.png\""), std::string::npos);
   EXPECT_NE(html.find("<img src=\"clusters.png\""), std::string::npos);
+  // The summary, above the tables, counts the models and clusters and records the fit's speed:
+  // 10 texels, models 0 1 2 0 1 2 0 1 2 0 (own_lobe 3 of 10), clusters 0 x5 and 1 x5.
+  const size_t tables = html.find("<section id=\"tables\">");
+  ASSERT_NE(tables, std::string::npos);
+  for (const char* text : {"own_lobe 30.0 %", "lambert_lobe_absent 40.0 %", "of 10 texels",
+                           "2 clusters over 10 texels (largest 50.0 %)", "3.25 s total",
+                           "2.50 s fitting", "1234 fits/s"}) {
+    const size_t at = html.find(text);
+    EXPECT_NE(at, std::string::npos) << text;
+    EXPECT_LT(at, tables) << text;
+  }
+}
+
+// A PNG stores a display value v as round(255 v): read back, it is off by up to half a step.
+// One step leaves room for float rounding of v itself.
+constexpr double kPngStep = 1.0 / 255;
+// ComposeFigure's layout for 32-px images (font scale 1): pad 4, title row 7 + 2 pads, panels
+// separated by a pad; the error map is the third panel.
+constexpr int kFigurePad = 4, kFigureTitleH = 7 + 2 * kFigurePad, kFigureSize = 32;
+constexpr int kErrorPanelX = 3 * kFigurePad + 2 * kFigureSize;
+
+TEST(Validate, ErrorMapsOfAllImagesShareOneScaleAndTheWorstComeFirst) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.01, kFigureSize, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  ASSERT_TRUE(render::RenderCapture(*capture, dir / "capture/gt/params.exr", dir / "renders", {}).ok());
+  // One holdout render ten times too bright: its PSNR falls far below every other's (the others
+  // err by noise only; the lowest, ~10 dB, is a view lit from behind whose peak is noise).
+  std::vector<const CaptureImage*> holdout;
+  for (const CaptureImage& image : capture->images) {
+    if (image.split == Split::kHoldout) holdout.push_back(&image);
+  }
+  ASSERT_GE(holdout.size(), 3u);
+  const CaptureImage& bad = *holdout[1];
+  const fs::path bad_render = dir / "renders" / render::RenderPathFor(bad.file);
+  Image brighter = ReadExrRgb(bad_render).value();
+  for (float& v : brighter.data) v *= 10;
+  ASSERT_TRUE(WriteExr(bad_render, brighter).ok());
+  ValidateOptions options;
+  options.max_figures = 3;
+  auto summary = RunValidation(*capture, dir / "renders", dir / "report", options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+
+  // metrics.json records the one scale, how it was chosen and its colour map.
+  const Json metrics = Json::parse(ReadTextFile(dir / "report/metrics.json").value());
+  const Json& scale = metrics["figures"]["error_scale"];
+  const double error_scale = scale["fraction_of_peak"].get<double>();
+  EXPECT_EQ(metrics["figures"]["error_scale_fraction_of_peak"].get<double>(), error_scale);
+  EXPECT_EQ(scale["source"], "automatic");
+  EXPECT_EQ(scale["quantile"].get<double>(), kMapErrorScaleQuantile);
+  EXPECT_EQ(error_scale, NiceCeil(scale["pooled_quantile_fraction_of_peak"].get<double>()));
+  EXPECT_NE(scale["colour_map"].get<std::string>().find("viridis"), std::string::npos);
+  EXPECT_TRUE(fs::is_regular_file(dir / "report" / scale["legend"].get<std::string>()));
+  // The brightened image ranks worst and is drawn, though evenly spaced figures would skip it.
+  ASSERT_FALSE(metrics["figures"]["worst_shown"].empty());
+  EXPECT_EQ(metrics["figures"]["worst_shown"][0], bad.file);
+  // Ranks follow PSNR: rank k has the k-th lowest.
+  std::vector<double> psnr_by_rank(metrics["images"].size() + 1);
+  for (const Json& image : metrics["images"]) {
+    psnr_by_rank.at(image["error_rank"].get<size_t>()) = image["psnr_db"].get<double>();
+  }
+  for (size_t k = 2; k < psnr_by_rank.size(); ++k) EXPECT_LE(psnr_by_rank[k - 1], psnr_by_rank[k]);
+  std::vector<Json> drawn;
+  for (const Json& image : metrics["images"]) {
+    if (image["file"] == bad.file) {
+      EXPECT_EQ(image["error_rank"], 1);
+    }
+    if (image.contains("figure")) drawn.push_back(image);
+  }
+  ASSERT_GE(drawn.size(), 2u);
+
+  // Every drawn error map shows its pixels' error on that one scale: colour = Viridis(e / scale),
+  // e = mean over RGB of |r - p| / peak, from the files themselves; and the colour bars match.
+  std::vector<Image> figures;
+  for (const Json& image : drawn) {
+    SCOPED_TRACE(image["file"].get<std::string>());
+    const Image figure = ReadPng(dir / "report" / image["figure"].get<std::string>()).value();
+    const Image photo = ReadImageRgb(capture->Resolve(image["file"].get<std::string>())).value();
+    const Image render = ReadExrRgb(dir / "renders" / image["render"].get<std::string>()).value();
+    const double peak = image["peak"].get<double>();
+    int checked = 0;
+    for (int y = 0; y < kFigureSize; ++y) {
+      for (int x = 0; x < kFigureSize; ++x) {
+        const int fx = kErrorPanelX + x, fy = kFigureTitleH + y;
+        bool grey = true;  // not evaluated (0.22 in all channels)
+        for (int c = 0; c < 3; ++c) grey &= std::abs(figure.at(fx, fy, c) - 0.22) <= kPngStep;
+        if (grey) continue;
+        double e = 0;
+        for (int c = 0; c < 3; ++c) e += std::abs(double(render.at(x, y, c)) - photo.at(x, y, c));
+        const Rgb expected = Viridis(e / 3 / peak / error_scale);
+        for (int c = 0; c < 3; ++c) {
+          ASSERT_NEAR(figure.at(fx, fy, c), expected[c], kPngStep) << x << "," << y;
+        }
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 0);
+    figures.push_back(figure);
+  }
+  for (size_t k = 1; k < figures.size(); ++k) {
+    ASSERT_EQ(figures[k].width, figures[0].width);
+    // Right of the error panel: the colour bar and its labels, up to the caption row.
+    for (int y = 0; y < kFigureTitleH + kFigureSize; ++y) {
+      for (int x = kErrorPanelX + kFigureSize; x < figures[0].width; ++x) {
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(figures[k].at(x, y, c), figures[0].at(x, y, c));
+      }
+    }
+  }
+
+  // The page: summary first, then the worst images, all figures, maps, and the tables last.
+  const std::string html = ReadTextFile(dir / "report/report.html").value();
+  const std::vector<std::string> order = {"<section id=\"summary\">", "images compared",
+                                          "<section id=\"worst\">", "error_scale.png",
+                                          "<section id=\"figures\">", "<section id=\"maps\">",
+                                          "<section id=\"tables\">", "<h2>Per image</h2>",
+                                          "<h2>Worst pixels</h2>", "<h2>Timings</h2>"};
+  size_t at = 0;
+  for (const std::string& part : order) {
+    const size_t found = html.find(part, at);
+    ASSERT_NE(found, std::string::npos) << part << " missing or out of order";
+    at = found;
+  }
+  // The worst image is the first figure on the page, captioned as such.
+  const size_t first_figure = html.find("<img src=\"figures/");
+  ASSERT_NE(first_figure, std::string::npos);
+  std::string bad_figure;
+  for (const Json& image : drawn) {
+    if (image["file"] == bad.file) bad_figure = image["figure"].get<std::string>();
+  }
+  ASSERT_FALSE(bad_figure.empty());
+  EXPECT_EQ(html.find("<img src=\"" + bad_figure + "\""), first_figure);
+  EXPECT_NE(html.find("#1 " + bad.file), std::string::npos);
+  EXPECT_LT(html.find("#1 " + bad.file), html.find("<section id=\"figures\">"));
 }
 
 TEST(Validate, NumbersDoNotDependOnTheThreadCount) {
