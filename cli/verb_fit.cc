@@ -152,14 +152,12 @@ int RunFit(int argc, char** argv) {
     std::fprintf(stderr, "reflcap fit: %s\n", s.message().c_str());
     return kExitUsage;
   }
-  if (!shard_text.empty()) {
-    auto shard = ParseShard(shard_text);
-    if (!shard.ok()) {
-      std::fprintf(stderr, "reflcap fit: %s\n", shard.status().message().c_str());
-      return kExitUsage;
-    }
-    control.shard = *shard;
+  auto shard = ParseShard(shard_text);  // "" = the whole work
+  if (!shard.ok()) {
+    std::fprintf(stderr, "reflcap fit: %s\n", shard.status().message().c_str());
+    return kExitUsage;
   }
+  control.shard = *shard;
   fit::VulkanFitterOptions vulkan = fit_flags.vulkan;
   vulkan.device = device;
   auto summary = fit::RunFit(samples, out, backend->backend, options, overwrite, vulkan,

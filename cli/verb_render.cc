@@ -88,12 +88,9 @@ int RunRender(int argc, char** argv) {
   if (!shadow_map.empty() && shadow_map != "auto" && shadow_map != "cube" && shadow_map != "fitted") {
     return usage("--shadow-map: \"" + shadow_map + "\" is not one of auto, cube, fitted");
   }
-  Shard shard;
-  if (!shard_text.empty()) {
-    auto parsed = ParseShard(shard_text);
-    if (!parsed.ok()) return usage(parsed.status().message());
-    shard = *parsed;
-  }
+  auto parsed_shard = ParseShard(shard_text);  // "" = every selected photograph
+  if (!parsed_shard.ok()) return usage(parsed_shard.status().message());
+  const Shard shard = *parsed_shard;
   auto capture = ReadCapture(capture_path);
   if (!capture.ok()) return ReportError("render", capture.status());
   fs::path params = fit;

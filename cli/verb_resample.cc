@@ -114,14 +114,12 @@ int RunResample(int argc, char** argv) {
     return kExitUsage;
   }
   options.chunk_texels = uint32_t(chunk_texels);
-  if (!shard_text.empty()) {
-    auto shard = ParseShard(shard_text);
-    if (!shard.ok()) {
-      std::fprintf(stderr, "reflcap resample: %s\n", shard.status().message().c_str());
-      return kExitUsage;
-    }
-    options.shard = *shard;
+  auto shard = ParseShard(shard_text);  // "" = the whole work
+  if (!shard.ok()) {
+    std::fprintf(stderr, "reflcap resample: %s\n", shard.status().message().c_str());
+    return kExitUsage;
   }
+  options.shard = *shard;
   if (options.resume && no_checkpoint) {
     std::fprintf(stderr, "reflcap resample: --resume and --no-checkpoint exclude each other\n");
     return kExitUsage;

@@ -6,6 +6,7 @@
 namespace reflcap {
 
 StatusOr<Shard> ParseShard(const std::string& text) {
+  if (text.empty()) return Shard{};
   int index = -1, count = -1;
   char tail = 0;
   if (std::sscanf(text.c_str(), "%d/%d%c", &index, &count, &tail) != 2 || count < 1 ||

@@ -17,7 +17,8 @@ struct Shard {
 };
 // Job arrays larger than this are not a batch system's (Slurm's MaxArraySize defaults to 1001).
 constexpr int kMaxShards = 100000;
-// "3/8" -> {3, 8}. InvalidArgument (naming --shard) unless 0 <= I < N <= kMaxShards.
+// "3/8" -> {3, 8}; "" (no --shard) -> {0, 1}, the whole work. InvalidArgument (naming --shard)
+// unless 0 <= I < N <= kMaxShards.
 StatusOr<Shard> ParseShard(const std::string& text);
 
 // Items [begin, end) of shard `shard` among `items` in order: floor(I n / N) .. floor((I+1) n / N)

@@ -8,6 +8,7 @@
 
 #include "engine/core/atomic_file.h"
 #include "engine/fit/model.h"
+#include "engine/fit/fit_store.h"
 #include "engine/fit/problem.h"
 #include "engine/texel/sample_store.h"
 
@@ -46,30 +47,6 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 
 int Stride(int lobes) { return brdf::kChannels * brdf::ParamsPerChannel(lobes); }
 size_t RecordBytes(int lobes) { return 8 * size_t(Stride(lobes)) + 20; }
-
-void PackParams(const brdf::BrdfParams& p, int lobes, float* out) {
-  for (int c = 0; c < brdf::kChannels; ++c) out[c] = p.rho_d[c];
-  for (int k = 0; k < lobes; ++k) {
-    for (int c = 0; c < brdf::kChannels; ++c) {
-      const brdf::LobeParams& l = p.lobes[k][c];
-      float* o = out + brdf::kChannels + 4 * (brdf::kChannels * k + c);
-      o[0] = l.cx;
-      o[1] = l.cy;
-      o[2] = l.cz;
-      o[3] = l.n;
-    }
-  }
-}
-
-void UnpackParams(const float* in, int lobes, brdf::BrdfParams* p) {
-  for (int c = 0; c < brdf::kChannels; ++c) p->rho_d[c] = in[c];
-  for (int k = 0; k < lobes; ++k) {
-    for (int c = 0; c < brdf::kChannels; ++c) {
-      const float* i = in + brdf::kChannels + 4 * (brdf::kChannels * k + c);
-      p->lobes[k][c] = brdf::LobeParams{i[0], i[1], i[2], i[3]};
-    }
-  }
-}
 
 template <typename T>
 void Put(uint8_t** at, const T& value) {

@@ -8,9 +8,8 @@
 #include "engine/fit/problem.h"
 
 namespace reflcap::fit {
-namespace {
 
-void Pack(const brdf::BrdfParams& p, int lobes, float* out) {
+void PackParams(const brdf::BrdfParams& p, int lobes, float* out) {
   for (int c = 0; c < brdf::kChannels; ++c) out[c] = p.rho_d[c];
   for (int k = 0; k < lobes; ++k) {
     for (int c = 0; c < brdf::kChannels; ++c) {
@@ -24,7 +23,7 @@ void Pack(const brdf::BrdfParams& p, int lobes, float* out) {
   }
 }
 
-void Unpack(const float* in, int lobes, brdf::BrdfParams* p) {
+void UnpackParams(const float* in, int lobes, brdf::BrdfParams* p) {
   for (int c = 0; c < brdf::kChannels; ++c) p->rho_d[c] = in[c];
   for (int k = 0; k < lobes; ++k) {
     for (int c = 0; c < brdf::kChannels; ++c) {
@@ -33,8 +32,6 @@ void Unpack(const float* in, int lobes, brdf::BrdfParams* p) {
     }
   }
 }
-
-}  // namespace
 
 FitStore::FitStore(size_t texels, int lobes)
     : lobes_(lobes),
@@ -58,7 +55,7 @@ FitStore::FitStore(size_t texels, int lobes)
 void FitStore::Set(size_t t, const TexelFit& fit) {
   REFLCAP_CHECK(fit.params.num_lobes == lobes_)
       << "texel " << t << ": " << fit.params.num_lobes << " lobes, the store holds " << lobes_;
-  Pack(fit.params, lobes_, &params_[t * stride_]);
+  PackParams(fit.params, lobes_, &params_[t * stride_]);
   status_[t] = uint8_t(fit.status);
   cost_[t] = fit.cost;
   iterations_[t] = fit.iterations;
@@ -71,7 +68,7 @@ TexelFit FitStore::Get(size_t t) const {
   REFLCAP_CHECK(params_.size() == size() * stride_) << "Get after ReleaseParams";
   TexelFit fit;
   BeginTexel(lobes_, &fit);
-  Unpack(params(t), lobes_, &fit.params);
+  UnpackParams(params(t), lobes_, &fit.params);
   fit.status = status(t);
   fit.cost = cost_[t];
   fit.iterations = iterations_[t];
@@ -127,7 +124,7 @@ SigmaSpill::~SigmaSpill() {
 Status SigmaSpill::Write(size_t first, const std::vector<TexelFit>& fits) {
   REFLCAP_CHECK(first + fits.size() <= texels_ && !removed_);
   std::vector<float> block(fits.size() * stride_);
-  for (size_t i = 0; i < fits.size(); ++i) Pack(fits[i].sigma, lobes_, &block[i * stride_]);
+  for (size_t i = 0; i < fits.size(); ++i) PackParams(fits[i].sigma, lobes_, &block[i * stride_]);
   file_.seekp(std::streamoff(first * stride_ * sizeof(float)));
   file_.write(reinterpret_cast<const char*>(block.data()),
               std::streamsize(block.size() * sizeof(float)));

@@ -28,6 +28,11 @@
 
 namespace reflcap::fit {
 
+// One texel's parameters (or sigmas) in the layout above, its first `lobes` lobes: to and from
+// `3 + 12 lobes` floats. Unpack leaves the lobes past `lobes` as they are.
+void PackParams(const brdf::BrdfParams& params, int lobes, float* out);
+void UnpackParams(const float* in, int lobes, brdf::BrdfParams* params);
+
 // Texels may be written concurrently from several threads when each thread writes other texels.
 class FitStore {
  public:

@@ -278,6 +278,7 @@ TEST(FitCheckpoint, ShardsTileTheChunksAndOptionsRoundTrip) {
   }
   EXPECT_FALSE(ShardChunks(Shard{0, 8}, 7).ok());
   EXPECT_TRUE(ParseShard("7/8").ok());
+  EXPECT_EQ(ParseShard("").value().count, 1);  // no --shard: the whole work
   for (const char* bad : {"8/8", "-1/8", "1/0", "1", "1/2/3", "a/b", "1/2x"}) {
     EXPECT_FALSE(ParseShard(bad).ok()) << bad;
   }
