@@ -202,6 +202,22 @@ TEST(ResampleCli, ResumeAfterSigkillGivesTheUninterruptedStore) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("identity.min_cos"), std::string::npos) << r.err;
 
+  // A corrupt checkpoint is named, and nothing is written.
+  {
+    const nlohmann::json state =
+        nlohmann::json::parse(ReadTextFile(checkpoint / "checkpoint.json").value());
+    const fs::path coverage = checkpoint / state["coverage_file"].get<std::string>();
+    const std::string good = ReadTextFile(coverage).value();
+    std::string bad = good;
+    bad[bad.size() / 2] ^= 0x40;
+    testing::WriteText(coverage, bad);
+    r = RunCli("resample " + capture + " --out " + out.string() + common + " --resume", dir);
+    EXPECT_EQ(r.exit_code, 2);
+    EXPECT_NE(r.err.find(coverage.filename().string()), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("corrupt"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+    testing::WriteText(coverage, good);
+  }
   r = RunCli("resample " + capture + " --out " + out.string() + " --chunk-texels 300 --resume", dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("resumed after " + std::to_string(done)), std::string::npos) << r.err;
