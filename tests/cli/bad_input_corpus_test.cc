@@ -1,5 +1,5 @@
 // The bad-input corpus (README.md, "Hardening"): malformed files and flags for every verb of the
-// `reflcap` executable (merge and export excepted: they are still being written), each run as a
+// `reflcap` executable, each run as a
 // new user would run it. Every case asserts
 //   - the exit code (1 usage, 2 bad input, 4 internal: cli/cli.h),
 //   - that stderr names the file (or flag) and the field at fault,
@@ -152,6 +152,13 @@ fs::path TinyRenders() {
   const fs::path out = Fixtures() / "renders";
   MakeOnce(out, "render --quiet " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(out) +
                     " --split holdout --backend cpu");
+  return out;
+}
+
+fs::path TinyResamplePart(int index) {
+  const fs::path out = Fixtures() / ("resample_part" + std::to_string(index));
+  MakeOnce(out, "resample --quiet " + Q(TinyCapture()) + " --out " + Q(out) + " --atlas-res 64 --shard " +
+                    std::to_string(index) + "/2");
   return out;
 }
 
@@ -670,6 +677,56 @@ fs::path DiligentObject(const fs::path& dir, int lights) {
   REFLCAP_CHECK(WriteExr(dir / "normals.exr", normals).ok());
   REFLCAP_CHECK(WritePng(dir / "mask.png", Image(kSize, kSize, 1, 1.0f)).ok());
   return dir;
+}
+
+// merge (issue 19) and export (issue 20): parts that do not belong together, corrupt parts, and
+// the flags.
+TEST(BadInputCorpus, MergeAndExport) {
+  const std::vector<Case> cases = {
+      {"merge: no parts", [](const fs::path& w) { return "merge --out " + Q(w / "out"); },
+       kUsage, {"PARTS"}},
+      {"merge: a folder that is not a part",
+       [](const fs::path& w) { return "merge " + Q(TinyFit()) + " --out " + Q(w / "out"); },
+       kBadInput, {"fit", "not a part"}},
+      {"merge: a shard missing",
+       [](const fs::path& w) { return "merge " + Q(TinyResamplePart(0)) + " --out " + Q(w / "out"); },
+       kBadInput, {"shard 1 is missing"}},
+      {"merge: the same shard twice",
+       [](const fs::path& w) {
+         return "merge " + Q(TinyResamplePart(0)) + " " + Q(TinyResamplePart(0)) + " --out " + Q(w / "out");
+       },
+       kBadInput, {"resample_part.json", "shard 0 is also"}},
+      {"merge: resample_part.json not JSON",
+       [](const fs::path& w) {
+         const fs::path part = CopyTo(TinyResamplePart(1), w, "part1");
+         testing::WriteText(part / "resample_part.json", "{\"format\": ");
+         return "merge " + Q(TinyResamplePart(0)) + " " + Q(part) + " --out " + Q(w / "out");
+       },
+       kBadInput, {"part1/resample_part.json", "format"}},
+      {"merge: a truncated chunk in a part",
+       [](const fs::path& w) {
+         const fs::path part = CopyTo(TinyResamplePart(1), w, "part1");
+         fs::resize_file(part / "chunk_00000.rcs", fs::file_size(part / "chunk_00000.rcs") / 2);
+         return "merge " + Q(TinyResamplePart(0)) + " " + Q(part) + " --out " + Q(w / "out");
+       },
+       kBadInput, {"part1/chunk_00000.rcs", "truncated"}},
+      {"fit: --shard 2/2", [](const fs::path& w) {
+         return "fit " + Q(TinySamples()) + " --out " + Q(w / "out") + " --shard 2/2"; },
+       kUsage, {"--shard"}},
+      {"fit: a resample part alone",
+       [](const fs::path& w) { return "fit " + Q(TinyResamplePart(0)) + " --out " + Q(w / "out"); },
+       kBadInput, {"resample_part0", "reflcap merge"}},
+      {"export: no --gltf",
+       [](const fs::path&) { return "export " + Q(TinyFit()); },
+       kUsage, {"--gltf"}},
+      {"export: a folder without params.exr",
+       [](const fs::path& w) {
+         fs::create_directories(w / "empty fit");
+         return "export " + Q(w / "empty fit") + " --gltf " + Q(w / "out.glb");
+       },
+       kBadInput, {"empty fit", "params.exr"}},
+  };
+  RunCases(cases);
 }
 
 TEST(BadInputCorpus, ImportDiligent) {
