@@ -1,6 +1,5 @@
 // The bad-input corpus (README.md, "Hardening"): malformed files and flags for every verb of the
-// `reflcap` executable, each run as a
-// new user would run it. Every case asserts
+// `reflcap` executable, each run as a new user would run it. Every case asserts
 //   - the exit code (1 usage, 2 bad input, 4 internal: cli/cli.h),
 //   - that stderr names the file (or flag) and the field at fault,
 //   - that nothing was left behind: the output does not exist (or is still empty) and no new
