@@ -602,7 +602,12 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                         {"prepare_s", vulkan_stats.prepare_seconds},
                         {"finish_s", vulkan_stats.finish_seconds}};
   }
-  if (select_model) report["lobe_model_choice"] = {{"aniso", info.texels - iso_chosen}, {"iso", iso_chosen}};
+  if (select_model) {
+    report["lobe_model_choice"] = {{"aniso", info.texels - iso_chosen}, {"iso", iso_chosen}};
+    // Chunk result files do not record which model won: chunks read back by --resume count as
+    // aniso here (their parameters are the chosen ones all the same).
+    if (pass->resumed_chunks > 0) report["lobe_model_choice"]["resumed_chunks_not_counted"] = pass->resumed_chunks;
+  }
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);
   report["timings_s"] = {{"read_wait", read_seconds},
@@ -684,6 +689,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     Json part = manifest.ToJson();
     part["device"] = device;
     part["fitted_chunks"] = pass.fitted_chunks;
+    part["iso_chosen"] = pass.iso_chosen;  // --lobe-model auto: texels that kept the iso fit
     part["resumed_chunks"] = pass.resumed_chunks;
     part["timings_s"] = {{"read_wait", pass.read_seconds},
                          {"fit", pass.fit_seconds},
@@ -823,6 +829,7 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
     const double read_s = j.contains("timings_s") ? j["timings_s"].value("read_wait", 0.0) : 0.0;
     pass.fit_seconds += fit_s;
     pass.read_seconds += read_s;
+    pass.iso_chosen += j.value("iso_chosen", size_t{0});
     const std::string part_device = j.value("device", std::string());
     if (device.empty()) device = part_device;
     if (part_device != device) {
