@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <exception>
 #include <limits>
 #include <string>
 #include <string_view>
@@ -804,12 +805,18 @@ StatusOr<TriangleMesh> LoadGltf(const fs::path& path, MeshLoadStats* stats) {
   const std::string base_dir = path.parent_path().string();
   // Binary glTF starts with the magic "glTF"; trust the content rather than the extension.
   const bool binary = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
-  const bool ok =
-      binary ? loader.LoadBinaryFromMemory(&model, &err, &warn,
-                                           reinterpret_cast<const unsigned char*>(bytes.data()),
-                                           unsigned(bytes.size()), base_dir)
-             : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), unsigned(bytes.size()),
-                                          base_dir);
+  bool ok = false;
+  // tinygltf indexes some arrays with at(): a malformed file can throw out of the parser (found
+  // by the gltf fuzzer: an accessor naming a buffer view of a buffer list that is empty).
+  try {
+    ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn,
+                                              reinterpret_cast<const unsigned char*>(bytes.data()),
+                                              unsigned(bytes.size()), base_dir)
+                : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(),
+                                             unsigned(bytes.size()), base_dir);
+  } catch (const std::exception& e) {
+    return DataLossError(path.string(), ": cannot parse glTF: malformed (", e.what(), ")");
+  }
   if (!ok) {
     return DataLossError(path.string(),
                          ": cannot parse glTF: ", TrimTrailingNewlines(err.empty() ? warn : err));
