@@ -101,22 +101,14 @@ StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
                                      first.shard.count, ") differs from ", first_file);
     }
   }
-  std::vector<int> of_shard(size_t(first.shard.count), -1);
-  for (size_t i = 0; i < parts.size(); ++i) {
-    int& slot = of_shard[size_t(parts[i].shard.index)];
-    if (slot >= 0) {
-      return FailedPreconditionError((parts[i].dir / kResamplePartFile).string(), ": shard ",
-                                     parts[i].shard.index, " is also ",
-                                     (parts[size_t(slot)].dir / kResamplePartFile).string());
-    }
-    slot = int(i);
+  std::vector<int> shard_of_part;
+  std::vector<std::string> files;
+  for (const Part& p : parts) {
+    shard_of_part.push_back(p.shard.index);
+    files.push_back((p.dir / kResamplePartFile).string());
   }
-  for (int s = 0; s < first.shard.count; ++s) {
-    if (of_shard[size_t(s)] < 0) {
-      return FailedPreconditionError("merge: ", parts.size(), " parts given for a resample of ",
-                                     first.shard.count, " shards (shard ", s, " is missing)");
-    }
-  }
+  REFLCAP_ASSIGN_OR_RETURN(const std::vector<int> of_shard,
+                           PartOfEachShard(shard_of_part, first.shard.count, files, "resample"));
   uint32_t next_view = 0;
   for (int s = 0; s < first.shard.count; ++s) {
     const Part& p = parts[size_t(of_shard[size_t(s)])];

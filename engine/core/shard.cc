@@ -27,6 +27,27 @@ StatusOr<ItemRange> ShardRange(Shard shard, uint32_t items, const std::string& w
   return ItemRange{uint32_t(shard.index * n / shard.count), uint32_t((shard.index + 1) * n / shard.count)};
 }
 
+StatusOr<std::vector<int>> PartOfEachShard(const std::vector<int>& shard_of_part, int count,
+                                           const std::vector<std::string>& files,
+                                           const std::string& what) {
+  std::vector<int> part(size_t(count), -1);
+  for (size_t i = 0; i < shard_of_part.size(); ++i) {
+    int& slot = part[size_t(shard_of_part[i])];
+    if (slot >= 0) {
+      return FailedPreconditionError(files[i], ": shard ", shard_of_part[i], " is also ",
+                                     files[size_t(slot)]);
+    }
+    slot = int(i);
+  }
+  for (int s = 0; s < count; ++s) {
+    if (part[size_t(s)] < 0) {
+      return FailedPreconditionError("merge: ", shard_of_part.size(), " parts given for a ", what,
+                                     " of ", count, " shards (shard ", s, " is missing)");
+    }
+  }
+  return part;
+}
+
 std::filesystem::path CheckpointDir(const std::filesystem::path& out) {
   std::filesystem::path dir = out;
   if (!dir.has_filename()) dir = dir.parent_path();  // "FIT/" -> "FIT"

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "engine/core/status.h"
 
@@ -29,6 +30,14 @@ struct ItemRange {
   uint32_t end = 0;
 };
 StatusOr<ItemRange> ShardRange(Shard shard, uint32_t items, const std::string& what);
+
+// Which part holds each shard 0..count-1, given the shard index of every part (each in [0,
+// count)) and the part files named in messages: the answer's entry s is the index into `files`.
+// FailedPrecondition naming both files when a shard is given twice, or the first missing shard
+// ("merge: K parts given for a WHAT of N shards (shard s is missing)").
+StatusOr<std::vector<int>> PartOfEachShard(const std::vector<int>& shard_of_part, int count,
+                                           const std::vector<std::string>& files,
+                                           const std::string& what);
 
 // The checkpoint folder of an output: OUT.checkpoint beside OUT.
 std::filesystem::path CheckpointDir(const std::filesystem::path& out);

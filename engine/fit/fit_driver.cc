@@ -758,27 +758,14 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
     part_json.push_back(std::move(json));
   }
   const FitPartManifest& first = manifests.front();
-  if (size_t(first.shard.count) != parts.size()) {
-    std::vector<bool> seen(size_t(first.shard.count), false);
-    for (const auto& m : manifests) seen[size_t(m.shard.index)] = true;
-    int missing = 0;
-    while (missing < first.shard.count && seen[size_t(missing)]) ++missing;
-    return FailedPreconditionError("merge: ", parts.size(), " parts given for a fit of ",
-                                   first.shard.count, " shards",
-                                   missing < first.shard.count
-                                       ? " (shard " + std::to_string(missing) + " is missing)"
-                                       : std::string(" (a shard is given twice)"));
-  }
-  std::vector<int> part_of_shard(size_t(first.shard.count), -1);
+  std::vector<int> shard_of_part;
+  std::vector<std::string> files;
   for (size_t i = 0; i < manifests.size(); ++i) {
-    int& slot = part_of_shard[size_t(manifests[i].shard.index)];
-    if (slot >= 0) {
-      return FailedPreconditionError((parts[i] / kFitPartFile).string(), ": shard ",
-                                     manifests[i].shard.index, " is also ",
-                                     (parts[size_t(slot)] / kFitPartFile).string());
-    }
-    slot = int(i);
+    shard_of_part.push_back(manifests[i].shard.index);
+    files.push_back((parts[i] / kFitPartFile).string());
   }
+  REFLCAP_ASSIGN_OR_RETURN(const std::vector<int> part_of_shard,
+                           PartOfEachShard(shard_of_part, first.shard.count, files, "fit"));
   uint32_t next_chunk = 0;
   for (int s = 0; s < first.shard.count; ++s) {
     const FitPartManifest& m = manifests[size_t(part_of_shard[size_t(s)])];

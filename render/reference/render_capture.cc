@@ -415,7 +415,8 @@ Status MergeRenderParts(const std::vector<fs::path>& parts, const fs::path& out_
   }
   const Json& first = reports.front()["shard"];
   const int count = first.value("count", 0);
-  std::vector<int> of_shard(size_t(std::max(count, 0)), -1);
+  std::vector<int> shard_of_part;
+  std::vector<std::string> files;
   for (size_t i = 0; i < reports.size(); ++i) {
     const Json& sh = reports[i]["shard"];
     const std::string file = (parts[i] / "render_report.json").string();
@@ -438,18 +439,11 @@ Status MergeRenderParts(const std::vector<fs::path>& parts, const fs::path& out_
                                      (parts.front() / "render_report.json").string());
     }
     if (index < 0 || index >= count) return DataLossError(file, ": shard.index: ", index, " not in [0, ", count, ")");
-    if (of_shard[size_t(index)] >= 0) {
-      return FailedPreconditionError(file, ": shard ", index, " is also ",
-                                     (parts[size_t(of_shard[size_t(index)])] / "render_report.json").string());
-    }
-    of_shard[size_t(index)] = int(i);
+    shard_of_part.push_back(index);
+    files.push_back(file);
   }
-  for (int s = 0; s < count; ++s) {
-    if (of_shard[size_t(s)] < 0) {
-      return FailedPreconditionError("merge: ", parts.size(), " parts given for a render of ", count,
-                                     " shards (shard ", s, " is missing)");
-    }
-  }
+  REFLCAP_ASSIGN_OR_RETURN(const std::vector<int> of_shard,
+                           PartOfEachShard(shard_of_part, count, files, "render"));
   // Every part's files, checked before any is copied; then one report in shard order.
   Json images = Json::array();
   Json merged = reports[size_t(of_shard[0])];
