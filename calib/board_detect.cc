@@ -9,6 +9,7 @@
 
 #include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
+#include "engine/image/srgb.h"
 
 namespace reflcap::calib {
 namespace {
@@ -25,6 +26,19 @@ constexpr double kMarginSampleFraction = 0.5;
 // A found grid must lie within this fraction of the median corner spacing of its prediction:
 // below one half, a grid shifted by a whole square can never pass.
 constexpr double kPredictionTolerance = 0.35;
+
+// Symmetry refinement: at most this many Levenberg-Marquardt steps (it settles in 3-6 from a
+// detector's corner), and "settled" once a step moves the corner by less than this (pixels),
+// far below the corners' noise of a few hundredths of a pixel.
+constexpr int kSymmetryMaxIterations = 30;
+constexpr double kSymmetrySettledPx = 1e-4;
+// Symmetry refinement passes (RefineCorners): the second one starts from refined neighbours.
+constexpr int kSymmetryPasses = 2;
+// Symmetry refinement with shading: the odd monomials of the light up to cubic (RefineBySymmetry).
+constexpr int kShadingTerms = 6;
+// Samples from a window's centre to its edge, at most: 48 keeps one corner's evaluation near
+// 10^4 bicubic taps pairs; at 0.7 px spacing only squares beyond 56 px reach it.
+constexpr int kSymmetryMaxSamplesPerSide = 48;
 
 cv::Mat ToGrey8(const Image& grey) {
   cv::Mat out(grey.height, grey.width, CV_8U);
@@ -357,6 +371,287 @@ double MedianSpacing(const BoardSpec& b, const std::vector<Vec2d>& c) {
   return d[d.size() / 2];
 }
 
+// --- Symmetry refinement (header comment) ---------------------------------------------------------
+
+// The photo as the refinement samples it: one float per pixel, row-major, sRGB decoded if asked.
+struct Plane {
+  int width = 0;
+  int height = 0;
+  std::vector<float> values;
+};
+
+Plane MakePlane(const Image& grey, bool srgb, double blur_sigma_px) {
+  Plane p{grey.width, grey.height, std::vector<float>(grey.PixelCount())};
+  for (int y = 0; y < grey.height; ++y) {
+    for (int x = 0; x < grey.width; ++x) {
+      // Clamped to [0, 1] first: the curve is defined there, and a photo's codes are.
+      const double v = std::clamp(double(grey.at(x, y)), 0.0, 1.0);
+      p.values[size_t(y) * grey.width + x] = float(srgb ? SrgbToLinear(v) : v);
+    }
+  }
+  if (blur_sigma_px > 0) {
+    cv::Mat m(p.height, p.width, CV_32F, p.values.data());
+    cv::GaussianBlur(m, m, cv::Size(0, 0), blur_sigma_px, blur_sigma_px, cv::BORDER_REPLICATE);
+  }
+  return p;
+}
+
+// Keys' cubic convolution kernel (a = -1/2, the one that reproduces quadratics) and its derivative.
+double CubicWeight(double t) {
+  t = std::abs(t);
+  if (t <= 1) return (1.5 * t - 2.5) * t * t + 1;
+  if (t < 2) return ((-0.5 * t + 2.5) * t - 4) * t + 2;
+  return 0;
+}
+double CubicSlope(double t) {
+  const double sign = t < 0 ? -1 : 1;
+  t = std::abs(t);
+  if (t <= 1) return sign * (4.5 * t - 5) * t;
+  if (t < 2) return sign * ((-1.5 * t + 5) * t - 4);
+  return 0;
+}
+
+// Bicubic value and gradient at (x, y), pixel centres at integers; false where the 4x4 taps leave
+// the photo.
+bool SampleBicubic(const Plane& p, double x, double y, double* value, double* dx, double* dy) {
+  if (!(x >= 1 && y >= 1 && x < p.width - 2 && y < p.height - 2)) return false;  // also NaN
+  const int ix = int(std::floor(x)), iy = int(std::floor(y));
+  const double fx = x - ix, fy = y - iy;
+  double wx[4], sx[4], wy[4], sy[4];
+  for (int i = 0; i < 4; ++i) {
+    wx[i] = CubicWeight(fx - (i - 1));
+    sx[i] = CubicSlope(fx - (i - 1));
+    wy[i] = CubicWeight(fy - (i - 1));
+    sy[i] = CubicSlope(fy - (i - 1));
+  }
+  double v = 0, gx = 0, gy = 0;
+  for (int j = 0; j < 4; ++j) {
+    const float* row = &p.values[size_t(iy - 1 + j) * p.width + (ix - 1)];
+    double r = 0, rs = 0;
+    for (int i = 0; i < 4; ++i) {
+      r += wx[i] * row[i];
+      rs += sx[i] * row[i];
+    }
+    v += wy[j] * r;
+    gx += wy[j] * rs;
+    gy += sy[j] * r;
+  }
+  *value = v;
+  *dx = gx;
+  *dy = gy;
+  return true;
+}
+
+// The local map of a corner: board coordinates s (squares, the corner at 0) -> pixels,
+// pixel = H(s + t), with H a homography through the corner's grid neighbours (held) and the
+// translation t estimated. On a planar board H is the projection itself up to lens distortion,
+// whose bending across one square is below a hundredth of a pixel in our photos.
+struct CornerFrame {
+  Eigen::Matrix3d H;
+  double square_px = 0;  // pixels per square at the corner, sqrt |det dH/ds|
+
+  Vec2d Map(const Vec2d& s, Eigen::Matrix2d* jacobian) const {
+    const Eigen::Vector3d h = H * Eigen::Vector3d(s.x(), s.y(), 1);
+    const Vec2d p = h.head<2>() / h.z();
+    if (jacobian) {
+      for (int c = 0; c < 2; ++c) jacobian->col(c) = (H.block<2, 1>(0, c) - p * H(2, c)) / h.z();
+    }
+    return p;
+  }
+};
+
+// Homography through the corner's start and its (up to 8) grid neighbours, a lost neighbour left
+// out (RANSAC). False when fewer than four points or a degenerate fit remain.
+bool FitCornerFrame(const BoardSpec& board, const std::vector<Vec2d>& start, int i, int j,
+                    CornerFrame* frame) {
+  const Vec2d centre = start[size_t(j) * board.corners_x + i];
+  if (!std::isfinite(centre.x()) || !std::isfinite(centre.y())) return false;
+  std::vector<std::pair<Vec2d, Vec2d>> pairs = {{Vec2d::Zero(), Vec2d::Zero()}};  // (board, pixel - centre)
+  std::vector<double> spacings;  // pixels per square to each neighbour
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const int ii = i + di, jj = j + dj;
+      if ((di == 0 && dj == 0) || ii < 0 || jj < 0 || ii >= board.corners_x || jj >= board.corners_y) continue;
+      const Vec2d q = start[size_t(jj) * board.corners_x + ii] - centre;
+      if (!std::isfinite(q.x()) || !std::isfinite(q.y())) continue;
+      pairs.emplace_back(Vec2d(di, dj), q);
+      spacings.push_back(q.norm() / std::hypot(di, dj));
+    }
+  }
+  if (spacings.empty()) return false;
+  // The median: a lost neighbour (far off) must not set the scale.
+  std::nth_element(spacings.begin(), spacings.begin() + spacings.size() / 2, spacings.end());
+  const double spacing = spacings[spacings.size() / 2];
+  if (pairs.size() < 4) return false;
+  std::vector<cv::Point2d> from, to;
+  for (const auto& [b, q] : pairs) {
+    from.emplace_back(b.x(), b.y());
+    to.emplace_back(q.x(), q.y());
+  }
+  // RANSAC (OpenCV's, seeded the same on every call) with a quarter of a square as the inlier
+  // bound, then least squares over the inliers; the corner itself must be one.
+  cv::Mat h, inliers;
+  try {
+    h = cv::findHomography(from, to, cv::RANSAC, spacing / 4, inliers);
+  } catch (const cv::Exception&) {
+    return false;
+  }
+  if (h.empty() || inliers.empty() || inliers.at<uint8_t>(0) == 0 || cv::countNonZero(inliers) < 4) return false;
+  Eigen::Matrix3d H;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) H(r, c) = h.at<double>(r, c);
+  }
+  // Back from offsets to pixels: H, then translate by the corner's start.
+  Eigen::Matrix3d shift = Eigen::Matrix3d::Identity();
+  shift.block<2, 1>(0, 2) = centre;
+  frame->H = shift * H;
+  Eigen::Matrix2d jacobian;
+  frame->Map(Vec2d::Zero(), &jacobian);
+  frame->square_px = std::sqrt(std::abs(jacobian.determinant()));
+  // Below 2 px per square there is no pattern left to fit; a square size far from the neighbours'
+  // spacing says the fit folded.
+  return frame->square_px > 2 && frame->square_px > spacing / 3 && frame->square_px < 3 * spacing;
+}
+
+// Gauss-Newton (Levenberg-Marquardt damped) on the symmetry residual over t; false when the window
+// leaves the photo or the solve does not settle. `corner` receives H(t).
+bool RefineBySymmetry(const Plane& photo, const CornerFrame& frame, const DetectOptions& options,
+                      Vec2d* corner) {
+  // Sample spacing in squares: symmetry_step_px in the photo, coarser on squares so large that
+  // the window would need more than kSymmetryMaxSamplesPerSide samples from centre to edge.
+  const double step_px =
+      std::max(options.symmetry_step_px, options.symmetry_radius * frame.square_px / kSymmetryMaxSamplesPerSide);
+  const double h = step_px / frame.square_px;
+  const int n = std::max(2, int(std::ceil(options.symmetry_radius / h)));
+  // Unknowns x = (t, c): the translation and, with symmetry_shading, the odd part of the light
+  // across the window, l(s) - l(-s) = 2 sum_k c_k m_k(s) relative to its mean, over the odd
+  // monomials m = (a, b, a^3, a^2 b, a b^2, b^3) of s = (a, b) in squares (the even part cancels in
+  // the residual). Residual per pair s, -s:
+  //   I(H(s + t)) - I(H(-s + t)) - (c . m(s)) (I(H(s + t)) + I(H(-s + t))),
+  // zero at the corner when the light is a cubic across the window. One sample of each pair: the
+  // upper half of the window (and the positive half of its middle row).
+  using VecP = Eigen::Matrix<double, 2 + kShadingTerms, 1>;
+  using MatP = Eigen::Matrix<double, 2 + kShadingTerms, 2 + kShadingTerms>;
+  const int unknowns = options.symmetry_shading ? 2 + kShadingTerms : 2;
+  auto odd_terms = [](const Vec2d& s, double* m) {
+    const double a = s.x(), b = s.y();
+    m[0] = a;
+    m[1] = b;
+    m[2] = a * a * a;
+    m[3] = a * a * b;
+    m[4] = a * b * b;
+    m[5] = b * b * b;
+  };
+  auto evaluate = [&](const VecP& x, MatP* jtj, VecP* jtr) -> std::optional<double> {
+    double cost = 0;
+    if (jtj) {
+      jtj->setZero();
+      jtr->setZero();
+    }
+    const Vec2d t = x.head<2>();
+    for (int b = 0; b <= n; ++b) {
+      for (int a = (b == 0 ? 1 : -n); a <= n; ++a) {
+        const Vec2d s(a * h, b * h);
+        double value[2];
+        Vec2d grad[2];
+        for (int side = 0; side < 2; ++side) {
+          Eigen::Matrix2d jacobian;
+          const Vec2d pixel = frame.Map((side == 0 ? s : Vec2d(-s)) + t, jtj ? &jacobian : nullptr);
+          double gx, gy;
+          if (!SampleBicubic(photo, pixel.x(), pixel.y(), &value[side], &gx, &gy)) return std::nullopt;
+          if (jtj) grad[side] = jacobian.transpose() * Vec2d(gx, gy);
+        }
+        double m[kShadingTerms];
+        odd_terms(s, m);
+        double gs = 0;
+        for (int k = 0; k + 2 < unknowns; ++k) gs += x[2 + k] * m[k];
+        const double r = value[0] - value[1] - gs * (value[0] + value[1]);
+        cost += r * r;
+        if (jtj) {
+          VecP j = VecP::Zero();
+          j.head<2>() = (1 - gs) * grad[0] - (1 + gs) * grad[1];
+          for (int k = 0; k + 2 < unknowns; ++k) j[2 + k] = -(value[0] + value[1]) * m[k];
+          *jtj += j * j.transpose();
+          *jtr += j * r;
+        }
+      }
+    }
+    return cost;
+  };
+  VecP x = VecP::Zero();
+  MatP jtj;
+  VecP jtr;
+  std::optional<double> cost = evaluate(x, &jtj, &jtr);
+  if (!cost) return false;
+  Eigen::Matrix2d jacobian;
+  frame.Map(Vec2d::Zero(), &jacobian);
+  double lambda = 1e-4;  // Marquardt's relative damping; the start is within a fraction of a pixel
+  bool settled = false;
+  for (int iteration = 0; iteration < kSymmetryMaxIterations && !settled; ++iteration) {
+    MatP damped = MatP::Identity();
+    damped.topLeftCorner(unknowns, unknowns) = jtj.topLeftCorner(unknowns, unknowns);
+    VecP rhs = VecP::Zero();
+    rhs.head(unknowns) = jtr.head(unknowns);
+    // The tiny absolute term keeps the system definite if a window sees no edge at all.
+    for (int k = 0; k < unknowns; ++k) damped(k, k) += lambda * jtj(k, k) + 1e-12;
+    const VecP step = -damped.ldlt().solve(rhs);
+    if (!step.allFinite()) return false;
+    MatP jtj_trial;
+    VecP jtr_trial;
+    const std::optional<double> trial_cost = evaluate(x + step, &jtj_trial, &jtr_trial);
+    if (trial_cost && *trial_cost <= *cost) {
+      x += step;
+      cost = trial_cost;
+      jtj = jtj_trial;
+      jtr = jtr_trial;
+      lambda = std::max(lambda * 0.1, 1e-9);
+      settled = (jacobian * step.head<2>()).norm() < kSymmetrySettledPx;
+    } else {
+      lambda *= 10;
+      // Damping this strong means no step lowers the cost: the minimum is reached to rounding.
+      if (lambda > 1e4) settled = true;
+    }
+  }
+  if (!settled) return false;
+  *corner = frame.Map(x.head<2>(), nullptr);
+  return std::isfinite(corner->x()) && std::isfinite(corner->y());
+}
+
+void RefineBySubPix(const Image& grey, const BoardSpec& board, const DetectOptions& options,
+                    std::vector<Vec2d>* corners, std::vector<uint8_t>* valid,
+                    const std::vector<int>& half_window) {
+  const int n = board.CornerCount();
+  cv::Mat img = ToGrey32(grey);
+  if (options.presmooth_sigma_px > 0) {
+    cv::GaussianBlur(img, img, cv::Size(0, 0), options.presmooth_sigma_px, options.presmooth_sigma_px,
+                     cv::BORDER_REPLICATE);
+  }
+  const cv::TermCriteria criteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4);
+  for (int w = options.min_half_window; w <= options.max_half_window; ++w) {
+    std::vector<int> ids;
+    std::vector<cv::Point2f> pts;
+    for (int k = 0; k < n; ++k) {
+      const Vec2d& p = (*corners)[k];
+      // cornerSubPix needs its window (and one pixel for gradients) inside the image.
+      if (half_window[k] != w) continue;
+      if (p.x() < w + 1 || p.y() < w + 1 || p.x() > grey.width - w - 2 || p.y() > grey.height - w - 2) {
+        (*valid)[k] = 0;
+        continue;
+      }
+      ids.push_back(k);
+      pts.emplace_back(float(p.x()), float(p.y()));
+    }
+    if (pts.empty()) continue;
+    try {
+      cv::cornerSubPix(img, pts, cv::Size(w, w), cv::Size(-1, -1), criteria);
+    } catch (const cv::Exception&) {
+      for (int k : ids) (*valid)[k] = 0;
+      continue;
+    }
+    for (size_t m = 0; m < ids.size(); ++m) (*corners)[ids[m]] = Vec2d(pts[m].x, pts[m].y);
+  }
+}
+
 BoardDetection MakeDetection(const Image& grey, const std::vector<BoardSpec>& boards, Identified id,
                              const DetectOptions& options) {
   BoardDetection det;
@@ -380,12 +675,28 @@ Status DetectOptions::Validate() const {
     return InvalidArgumentError("max_half_window must be >= min_half_window");
   }
   if (!(max_refine_shift_px > 0)) return InvalidArgumentError("max_refine_shift_px must be positive");
+  if (!(symmetry_radius > 0 && symmetry_radius < 1)) {
+    return InvalidArgumentError("symmetry_radius must be in (0, 1) squares (got ", symmetry_radius, ")");
+  }
+  if (!(symmetry_step_px >= 0.25 && symmetry_step_px <= 2)) {
+    return InvalidArgumentError("symmetry_step_px must be in [0.25, 2] (got ", symmetry_step_px, ")");
+  }
   if (!(min_contrast > 0 && min_contrast < 1)) return InvalidArgumentError("min_contrast must be in (0, 1)");
   // Beyond 3 px the blur spreads a corner over its neighbours' squares at typical square sizes.
   if (!(presmooth_sigma_px >= 0 && presmooth_sigma_px <= 3)) {
     return InvalidArgumentError("presmooth_sigma_px must be in [0, 3] (got ", presmooth_sigma_px, ")");
   }
   return OkStatus();
+}
+
+std::optional<CornerRefiner> ParseCornerRefiner(const std::string& name) {
+  if (name == "symmetry") return CornerRefiner::kSymmetry;
+  if (name == "subpix") return CornerRefiner::kCornerSubPix;
+  return std::nullopt;
+}
+
+const char* CornerRefinerName(CornerRefiner refiner) {
+  return refiner == CornerRefiner::kSymmetry ? "symmetry" : "subpix";
 }
 
 int BoardDetection::ValidCount() const { return int(std::count(valid.begin(), valid.end(), 1)); }
@@ -423,63 +734,58 @@ void RefineCorners(const Image& grey, const BoardSpec& board, const DetectOption
   REFLCAP_CHECK(int(corners->size()) == n);
   valid->assign(n, 1);
   half_window->assign(n, options.min_half_window);
-  cv::Mat img = ToGrey32(grey);
-  if (options.presmooth_sigma_px > 0) {
-    cv::GaussianBlur(img, img, cv::Size(0, 0), options.presmooth_sigma_px, options.presmooth_sigma_px,
-                     cv::BORDER_REPLICATE);
-  }
-  // Half-window per corner from its nearest 4-neighbour.
-  for (int j = 0; j < board.corners_y; ++j) {
-    for (int i = 0; i < board.corners_x; ++i) {
-      const int k = j * board.corners_x + i;
-      double d = 1e30;
-      for (const auto& [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-        const int ii = i + di, jj = j + dj;
-        if (ii < 0 || jj < 0 || ii >= board.corners_x || jj >= board.corners_y) continue;
-        d = std::min(d, ((*corners)[jj * board.corners_x + ii] - (*corners)[k]).norm());
-      }
-      (*half_window)[k] = std::clamp(int(std::floor(options.window_fraction * d)),
-                                     options.min_half_window, options.max_half_window);
-    }
-  }
   const std::vector<Vec2d> start = *corners;
-  const cv::TermCriteria criteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4);
-  for (int w = options.min_half_window; w <= options.max_half_window; ++w) {
-    std::vector<int> ids;
-    std::vector<cv::Point2f> pts;
-    for (int k = 0; k < n; ++k) {
-      const Vec2d& p = (*corners)[k];
-      // cornerSubPix needs its window (and one pixel for gradients) inside the image.
-      if ((*half_window)[k] != w) continue;
-      if (p.x() < w + 1 || p.y() < w + 1 || p.x() > grey.width - w - 2 || p.y() > grey.height - w - 2) {
-        (*valid)[k] = 0;
-        continue;
+  if (options.refiner == CornerRefiner::kSymmetry) {
+    const Plane photo = MakePlane(grey, options.photos_srgb, options.presmooth_sigma_px);
+    // Two passes: the second fits each corner's homography through its refined neighbours, so a
+    // detector's error in the neighbours (tenths of a pixel on oblique boards) does not shape the
+    // window; a corner the first pass dropped keeps its start as a neighbour.
+    for (int pass = 0; pass < kSymmetryPasses; ++pass) {
+      const std::vector<Vec2d> frames_from = *corners;
+      for (int j = 0; j < board.corners_y; ++j) {
+        for (int i = 0; i < board.corners_x; ++i) {
+          const int k = j * board.corners_x + i;
+          CornerFrame frame;
+          Vec2d refined;
+          if (!FitCornerFrame(board, frames_from, i, j, &frame) || !RefineBySymmetry(photo, frame, options, &refined)) {
+            (*valid)[k] = 0;
+            (*corners)[k] = start[k];
+            continue;
+          }
+          (*valid)[k] = 1;
+          (*corners)[k] = refined;
+          (*half_window)[k] = int(std::lround(options.symmetry_radius * frame.square_px));
+        }
       }
-      ids.push_back(k);
-      pts.emplace_back(float(p.x()), float(p.y()));
     }
-    if (pts.empty()) continue;
-    try {
-      cv::cornerSubPix(img, pts, cv::Size(w, w), cv::Size(-1, -1), criteria);
-    } catch (const cv::Exception&) {
-      for (int k : ids) (*valid)[k] = 0;
-      continue;
+  } else {
+    // Half-window per corner from its nearest 4-neighbour.
+    for (int j = 0; j < board.corners_y; ++j) {
+      for (int i = 0; i < board.corners_x; ++i) {
+        const int k = j * board.corners_x + i;
+        double d = 1e30;
+        for (const auto& [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+          const int ii = i + di, jj = j + dj;
+          if (ii < 0 || jj < 0 || ii >= board.corners_x || jj >= board.corners_y) continue;
+          d = std::min(d, ((*corners)[jj * board.corners_x + ii] - (*corners)[k]).norm());
+        }
+        (*half_window)[k] = std::clamp(int(std::floor(options.window_fraction * d)),
+                                       options.min_half_window, options.max_half_window);
+      }
     }
-    for (size_t m = 0; m < ids.size(); ++m) (*corners)[ids[m]] = Vec2d(pts[m].x, pts[m].y);
+    RefineBySubPix(grey, board, options, corners, valid, *half_window);
   }
   double sum = 0;
   int count = 0;
   for (int k = 0; k < n; ++k) {
     const double shift = ((*corners)[k] - start[k]).norm();
-    if (!std::isfinite(shift) || shift > options.max_refine_shift_px) {
+    if (!(*valid)[k] || !std::isfinite(shift) || shift > options.max_refine_shift_px) {
       (*valid)[k] = 0;
       (*corners)[k] = start[k];
       continue;
     }
-    if ((*valid)[k]) {
-      sum += shift * shift;
-      ++count;
-    }
+    sum += shift * shift;
+    ++count;
   }
   *shift_rms = count > 0 ? std::sqrt(sum / count) : 0.0;
 }

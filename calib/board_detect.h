@@ -14,17 +14,40 @@
 // colours. A symmetric board (BoardSpec::Symmetry) passes in more than one numbering: all are
 // returned, for the caller to choose with the rest of the target.
 //
-// Refinement. cornerSubPix's window must stay inside the four squares around a corner: on a
-// foreshortened board a fixed 7x7 window reaches the next corners and biases the result by tenths
-// of a pixel. The half-window is window_fraction x the distance to the nearest grid neighbour,
-// clamped to [min_half_window, max_half_window]. On the shared cuboid photos (corners started at
-// their true positions, faces with cos >= 0.35) this gives 0.060 px RMS, against 0.076 px for a
-// fixed 7x7 window. Larger windows and a Gaussian pre-smoothing lower the noise further (0.3 ->
-// 0.45 of the spacing: 0.071 -> 0.059 px; with a 0.8-px blur 0.050 px) but bias: lens distortion
-// and perspective bend the squares around a corner, and the more of them a window sees, the more
-// the corners are pulled in, by a relative scale of -1e-5 (0.3), -6e-5 (0.4), -2.2e-4 (0.45 with
-// the blur) of the board's size. -2.2e-4 makes the cuboid look 0.2 mm further away than it is
-// (the adjusted axis point moved by 0.14 mm); -6e-5 stays within 0.01 mm. Hence 0.4, no blur.
+// Refinement (default: point symmetry). An inner corner of a checkerboard is a centre of point
+// symmetry of the printed pattern: the board at corner + d looks like the board at corner - d.
+// Each corner gets a homography H from board coordinates around it (in squares, the corner at 0)
+// to pixels, fitted (RANSAC, so a lost neighbour drops out) through its grid neighbours; then a
+// translation t is adjusted by Levenberg-Marquardt until the photo, sampled (bicubic) at H(s + t)
+// and H(-s + t) for every s of a square window, agrees with itself; the corner is H(t). The
+// residual compares black with black and white with white, so it needs no model of the edge
+// profile or the blur; H follows a foreshortened board; the light may vary across the window (its
+// odd part up to cubic, six more unknowns: a gradient of the light is the one thing that breaks
+// the symmetry on a real board). Two passes: the second fits H through refined neighbours. The
+// idea is Schöps et al. 2020, "Why having 10,000 parameters in your camera model is better than
+// twelve" (their symmetry-based feature refinement); this formulation is ours. The window reaches
+// symmetry_radius squares from the corner, so it uses the whole length of the edges near the
+// corner, where cornerSubPix's gradient test uses a few pixels.
+//
+// Measured (corners started at their true projections + up to 0.3 px; bench/RESULTS.md, "Corner
+// refinement"): on the shared cuboid photos (faces at cos >= 0.35) 0.026 px RMS against
+// cornerSubPix's 0.060 px; on the shared board photos 0.020 px against 0.064 px; on the tests'
+// synthetic renders 0.006 px against 0.030 px. The photos' sRGB curve is decoded first (without:
+// 0.032 / 0.056 px); the shading terms take the cuboid from 0.028 to 0.026 px (the light falls off
+// steeply towards the turntable plate) and a synthetic gradient from 0.044 to 0.007 px. What stays
+// is systematic in those photos and common to both refiners: the corners sit 0.02 px off along the
+// rows next to the plate, and every face shrinks by a relative 5e-5 (the cuboid looks 0.04 mm
+// further away than it is). Larger windows average more noise, smaller ones see less of that
+// shrink; symmetry_radius (below) is the measured compromise.
+//
+// cornerSubPix (Förstner-style gradient orthogonality) stays as CornerRefiner::kCornerSubPix. Its
+// window must stay inside the four squares around a corner: on a foreshortened board a fixed 7x7
+// window reaches the next corners and biases the result by tenths of a pixel. The half-window is
+// window_fraction x the distance to the nearest grid neighbour, clamped to [min_half_window,
+// max_half_window]: 0.060 px RMS on the shared photos against 0.076 px for a fixed 7x7 window.
+// Larger windows and a Gaussian pre-smoothing lower its noise further but bias (lens distortion
+// and perspective bend the squares around a corner; -2.2e-4 relative scale with 0.45 and a 0.8-px
+// blur, which moved the adjusted axis point by 0.14 mm). Hence 0.4, no blur.
 //
 // OpenCV stays private: images cross this interface as engine Images.
 #include <filesystem>
@@ -39,7 +62,36 @@
 
 namespace reflcap::calib {
 
+enum class CornerRefiner {
+  kSymmetry,      // point symmetry under a local projective map (default; see the header comment)
+  kCornerSubPix,  // OpenCV's cornerSubPix with the adaptive window
+};
+
+// "symmetry" / "subpix"; nullopt for anything else.
+std::optional<CornerRefiner> ParseCornerRefiner(const std::string& name);
+const char* CornerRefinerName(CornerRefiner refiner);
+
 struct DetectOptions {
+  CornerRefiner refiner = CornerRefiner::kSymmetry;
+  // Symmetry refinement: the window's half-size in squares, in (0, 1) (at 1 it reaches the next
+  // corners, where the board's edge would break the symmetry). On the shared cuboid: 0.5 -> 0.8
+  // lowers the corners' error (0.030 -> 0.025 px) and the principal point's error with
+  // --refine-intrinsics (2.4 -> 1.9 px) but raises the faces' shrink (axis point 0.005 -> 0.019 mm,
+  // the averaged-poses baseline 0.018-0.019 mm); 0.7 keeps both under their targets
+  // (bench/RESULTS.md, "Calibration").
+  double symmetry_radius = 0.7;
+  // Symmetry refinement: spacing of the window's samples in the photo, pixels, in [0.25, 2]. Below
+  // one pixel every pixel of the edges contributes; halving 0.7 changed nothing measurable.
+  double symmetry_step_px = 0.7;
+  // The photos are sRGB-encoded (8-bit PNG, as cameras write them): decode the curve before the
+  // symmetry refinement. Its residual is indifferent to a tone curve only on an ideal image; on
+  // sampled, interpolated pixels the decoded values halve the error on the shared photos (header
+  // comment). False for linear photos.
+  bool photos_srgb = true;
+  // Symmetry refinement: let the light vary across the window (its odd part up to cubic: six more
+  // unknowns per corner). A gradient of the light breaks the symmetry the residual assumes; on the
+  // cuboid the light falls off steeply towards the turntable plate (see the header comment).
+  bool symmetry_shading = true;
   // cornerSubPix half-window = window_fraction x distance to the nearest grid neighbour (pixels),
   // in (0, 0.5): at 0.5 the window reaches the neighbouring corners. Default 0.4; see the header
   // comment for the measured trade-off.
@@ -72,7 +124,9 @@ struct BoardDetection {
   std::vector<std::vector<int>> alternatives;
   double contrast = 0;          // mean white - mean black square (0..1)
   double refine_shift_rms = 0;  // RMS move of the refinement (pixels)
-  std::vector<int> half_window; // cornerSubPix half-window used per corner (pixels)
+  // Per corner, the refinement's half-window in pixels (cornerSubPix's half-window; for the
+  // symmetry refinement symmetry_radius x the local square size).
+  std::vector<int> half_window;
   int ValidCount() const;
 };
 
@@ -101,8 +155,9 @@ std::optional<BoardDetection> FindBoardInRegion(const Image& grey,
                                                 const std::vector<Vec2d>* predicted,
                                                 const DetectOptions& options, std::string* why);
 
-// Refines `corners` (board order, pixels) in place by cornerSubPix with the adaptive window;
-// corners that move more than max_refine_shift_px are marked 0 in `valid`.
+// Refines `corners` (board order, pixels) in place with options.refiner; corners that cannot be
+// refined (window outside the photo, no convergence) or move more than max_refine_shift_px are
+// marked 0 in `valid` and keep their start.
 void RefineCorners(const Image& grey, const BoardSpec& board, const DetectOptions& options,
                    std::vector<Vec2d>* corners, std::vector<uint8_t>* valid,
                    std::vector<int>* half_window, double* shift_rms);

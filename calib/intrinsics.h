@@ -2,10 +2,10 @@
 // Camera intrinsics from photos of a planar checkerboard (`reflcap calibrate intrinsics`).
 //
 // Per camera: every board photo is searched (board_detect.h: SB detection, identification by
-// colours, adaptive cornerSubPix); OpenCV's calibrateCamera (Zhang 2000) gives the start; each
-// view is checked by PnP reprojection with that start (a wrong detection reprojects far worse than
-// the rest); then one Ceres adjustment over K (fx, fy, cx, cy), distortion (k1, k2, p1, p2, and k3
-// when asked) and every view's pose, with a Huber loss, refines all. Corners beyond
+// colours, corners refined by point symmetry); OpenCV's calibrateCamera (Zhang 2000) gives the
+// start; each view is checked by PnP reprojection with that start (a wrong detection reprojects
+// far worse than the rest); then one Ceres adjustment over K (fx, fy, cx, cy), distortion (k1,
+// k2, p1, p2, and k3 when asked) and every view's pose, with a Huber loss, refines all. Corners beyond
 // outlier_sigmas robust sigmas and views far worse than the median are rejected and the adjustment
 // repeated. The covariance (Ceres, J^T J inverse scaled by the residual variance) gives the
 // standard deviation of every parameter; coverage says how much of the frame the corners reached.

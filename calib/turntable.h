@@ -58,12 +58,13 @@ struct TurntableOptions {
   bool board_photos = true;
   bool angle_offsets = false;      // one offset per turntable angle (stepper backlash)
   // Face views seen more obliquely than this (cosine between the face normal and the direction to
-  // the camera) are not used, in (0, 1). Corner noise grows fast below ~0.35: cornerSubPix on the
-  // shared cuboid photos (true start) errs 0.060 px RMS at cos >= 0.35 but 0.25 px at 0.2-0.35.
+  // the camera) are not used, in (0, 1). Corner noise grows below ~0.35: on the shared cuboid
+  // photos (true start) the symmetry refinement errs 0.023-0.031 px RMS at cos >= 0.35 but 0.056 px
+  // at 0.2-0.35 (cornerSubPix 0.05-0.07 and 0.21 px); 0.2 adds 7 of 89 face views there.
   double min_cos = 0.35;
   // Weight each face view (and board photo) by its own corner noise, estimated from its residuals
   // and re-estimated every round: a foreshortened or badly lit board's corners are noisier (0.04 to
-  // 0.09 px RMS per view on the shared cuboid photos).
+  // 0.09 px RMS per view on the shared cuboid photos with cornerSubPix).
   bool weight_views = true;
   double loss_scale_px = 0.5;      // Huber scale, pixels (> 0); as IntrinsicsOptions
   double outlier_sigmas = 5;       // corner rejection, robust sigmas (> 0); as IntrinsicsOptions

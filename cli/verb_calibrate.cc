@@ -49,6 +49,33 @@ void AddSolverFlags(ArgParser* args, Options* options) {
   args->AddInt("threads", &options->threads, "worker threads (default: all cores)");
 }
 
+// Corner refinement flags, shared by both verbs (board_detect.h).
+struct DetectFlags {
+  std::string refiner;
+  bool linear_photos = false;
+};
+
+void AddDetectFlags(ArgParser* args, DetectFlags* flags) {
+  args->AddString("corner-refiner", &flags->refiner, "NAME",
+                  "symmetry (default: point symmetry of the board around each corner) or subpix "
+                  "(OpenCV cornerSubPix)");
+  args->AddFlag("linear-photos", &flags->linear_photos,
+                "the photos hold linear values (default: sRGB-encoded, decoded before refinement)");
+}
+
+Status ApplyDetectFlags(const DetectFlags& flags, calib::DetectOptions* detect) {
+  if (!flags.refiner.empty()) {
+    const auto refiner = calib::ParseCornerRefiner(flags.refiner);
+    if (!refiner) {
+      return InvalidArgumentError("--corner-refiner: unknown refiner \"", flags.refiner,
+                                  "\" (expected symmetry or subpix)");
+    }
+    detect->refiner = *refiner;
+  }
+  detect->photos_srgb = !flags.linear_photos;
+  return OkStatus();
+}
+
 fs::path DefaultReportDir(const fs::path& out) {
   return out.parent_path() / (out.stem().string() + "_report");
 }
@@ -77,7 +104,7 @@ int RunIntrinsics(int argc, char** argv) {
       "calibrate intrinsics", "CALIB.json --out INTRINSICS.json [options]",
       "Calibrate each camera's K and lens distortion from the planar board photos of a calib/1\n"
       "session (intrinsics_images, intrinsics_board): board detection (findChessboardCornersSB,\n"
-      "identification by the squares' colours, cornerSubPix in a window fitted to the squares),\n"
+      "identification by the squares' colours, each corner refined by the board's point symmetry),\n"
       "wrong detections rejected by PnP reprojection, then one Ceres adjustment per camera over K,\n"
       "distortion and every view's pose with a Huber loss and outlier rejection. Writes\n"
       "INTRINSICS.json (reflcap-intrinsics/1: K, dist, their sigmas and covariance per camera,\n"
@@ -90,6 +117,8 @@ int RunIntrinsics(int argc, char** argv) {
                  StrCat("what to estimate (default ", options.model.ToString(),
                         "; add k3; \"f\" instead of fx,fy ties them: square pixels)"));
   AddSolverFlags(&args, &options);
+  DetectFlags detect_flags;
+  AddDetectFlags(&args, &detect_flags);
   args.AddFlag("overwrite", &overwrite, "replace INTRINSICS.json and the report if they exist");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 3, &help); !s.ok()) return Usage("intrinsics", s.message());
@@ -103,6 +132,7 @@ int RunIntrinsics(int argc, char** argv) {
     if (!model.ok()) return Usage("intrinsics", StrCat("--intrinsics-params: ", model.status().message()));
     options.model = *model;
   }
+  if (Status s = ApplyDetectFlags(detect_flags, &options.detect); !s.ok()) return Usage("intrinsics", s.message());
   if (Status s = options.Validate(); !s.ok()) return Usage("intrinsics", s.message());
   if (report.empty()) report = DefaultReportDir(out).string();
   if (Status s = CheckOutputFile(out, overwrite); !s.ok()) return ReportError(kVerb, s);
@@ -209,6 +239,8 @@ int RunTurntable(int argc, char** argv) {
                  "write RIG.json as this capture/1 with its cameras and turntable calibrated");
   args.AddString("report", &report, "DIR", "report folder (default: beside the output, <name>_report)");
   AddSolverFlags(&args, &options);
+  DetectFlags detect_flags;
+  AddDetectFlags(&args, &detect_flags);
   args.AddFlag("overwrite", &overwrite, "replace RIG.json and the report if they exist");
   bool help = false;
   if (Status s = args.Parse(argc, argv, 3, &help); !s.ok()) return Usage("turntable", s.message());
@@ -225,6 +257,7 @@ int RunTurntable(int argc, char** argv) {
     options.intrinsics_model = *model;
   }
   if (no_boards && !options.refine_intrinsics) return Usage("turntable", "--no-board-photos needs --refine-intrinsics");
+  if (Status s = ApplyDetectFlags(detect_flags, &options.detect); !s.ok()) return Usage("turntable", s.message());
   if (Status s = options.Validate(); !s.ok()) return Usage("turntable", s.message());
   if (report.empty()) report = DefaultReportDir(out).string();
   if (Status s = CheckOutputFile(out, overwrite); !s.ok()) return ReportError(kVerb, s);

@@ -23,11 +23,6 @@ const std::array<ChartPatchReference, kChartPatches>& ColorCheckerClassic() {
   return kPatches;
 }
 
-double SrgbToLinear(double v) {
-  // The IEC 61966-2-1 piecewise curve: linear segment below 0.04045.
-  return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
-}
-
 Vec3d PatchAlbedo(int patch) {
   const auto& p = ColorCheckerClassic()[size_t(patch)];
   return Vec3d(SrgbToLinear(p.srgb8[0] / 255.0), SrgbToLinear(p.srgb8[1] / 255.0),

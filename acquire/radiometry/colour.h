@@ -10,6 +10,7 @@
 #include <array>
 #include <string>
 
+#include "engine/image/srgb.h"  // SrgbToLinear (decoding the chart's published sRGB values)
 #include "engine/math/types.h"
 
 namespace reflcap::radiometry {
@@ -27,8 +28,6 @@ struct ChartPatchReference {
 // Row by row, dark skin (top left) to black (bottom right).
 const std::array<ChartPatchReference, kChartPatches>& ColorCheckerClassic();
 
-// IEC 61966-2-1 decoding of an sRGB value in [0, 1].
-double SrgbToLinear(double v);
 // Linear albedo of patch i (0-based).
 Vec3d PatchAlbedo(int patch);
 

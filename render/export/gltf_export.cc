@@ -19,6 +19,7 @@
 #include "engine/core/parallel.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
+#include "engine/image/srgb.h"
 #include "engine/texel/brdf_maps.h"
 #include "render/export/metal_rough.h"
 
@@ -46,11 +47,8 @@ double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-// IEC 61966-2-1 sRGB encoding of a linear value in [0, 1].
-float LinearToSrgb(float x) {
-  x = std::clamp(x, 0.0f, 1.0f);
-  return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
-}
+// sRGB encoding of a linear value, clamped to [0, 1] (base colours from rho_d may exceed 1).
+float ClampedSrgb(float x) { return LinearToSrgb(std::clamp(x, 0.0f, 1.0f)); }
 
 // The binary buffer under construction: views appended 4-byte aligned (float accessors need it).
 struct BinBuilder {
@@ -264,7 +262,7 @@ StatusOr<GltfExportSummary> ExportGltf(const FittedCapture& fitted, const fs::pa
   for (size_t t = 0; t < atlas.TexelCount(); ++t) {
     int x, y;
     atlas.PixelOf(t, &x, &y);
-    for (int c = 0; c < 3; ++c) base.at(x, y, c) = LinearToSrgb(approx[t].base_color[c]);
+    for (int c = 0; c < 3; ++c) base.at(x, y, c) = ClampedSrgb(approx[t].base_color[c]);
     metal_rough.at(x, y, 0) = 1;  // R: unused by the core material (occlusion would be 1)
     metal_rough.at(x, y, 1) = approx[t].roughness;
     metal_rough.at(x, y, 2) = approx[t].metallic;

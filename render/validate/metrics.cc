@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/core/check.h"
+#include "engine/image/srgb.h"
 #include "render/reference/reference_renderer.h"
 
 namespace reflcap::validate {
@@ -183,10 +184,7 @@ std::optional<double> ErrorSums::PsnrLDb() const {
   return CappedDb(sse_ldr / ldr_values);
 }
 
-float SrgbEncode(float x) {
-  if (x <= 0.0031308f) return 12.92f * x;
-  return 1.055f * std::pow(x, 1 / 2.4f) - 0.055f;
-}
+float SrgbEncode(float x) { return LinearToSrgb(x); }
 
 float LdrValue(double x, double inv_white) {
   const double y = x * inv_white;
