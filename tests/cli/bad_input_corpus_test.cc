@@ -44,12 +44,7 @@ constexpr int kBadInput = 2;
 constexpr int kInternal = 4;
 
 // The argument quoted for /bin/sh (paths with spaces, quotes and non-ASCII characters).
-std::string Q(const std::string& arg) {
-  std::string quoted = "'";
-  for (char c : arg) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
-std::string Q(const fs::path& path) { return Q(path.string()); }
+std::string Q(const fs::path& path) { return testing::ShellQuote(path.string()); }
 
 // Runs `reflcap ARGS` through the shell, with `prefix` (shell commands such as a ulimit) first;
 // stdout and stderr go to files in `logs`.
@@ -193,49 +188,6 @@ void ReplaceInFile(const fs::path& path, const std::string& from, const std::str
   testing::WriteText(path, text);
 }
 
-// An uncompressed scanline OpenEXR of FLOAT channels, written byte by byte so that values (NaN,
-// Inf) and header fields (an enormous data window, a missing channel) are exactly as given —
-// WriteExr sanitises what it writes. `channels`: name -> width*height values (row-major); with
-// `header_only` the offset table and pixels are left out (a truncated file).
-std::string RawExr(int width, int height, const std::map<std::string, std::vector<float>>& channels,
-                   bool header_only = false) {
-  auto i32 = [](int32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
-  auto attr = [&](const std::string& name, const std::string& type, const std::string& body) {
-    return name + '\0' + type + '\0' + i32(int32_t(body.size())) + body;
-  };
-  std::string chlist;
-  for (const auto& [name, values] : channels) {
-    chlist += name + '\0' + i32(2) + std::string(4, '\0') + i32(1) + i32(1);  // FLOAT, 1x1
-  }
-  chlist += '\0';
-  const std::string box = i32(0) + i32(0) + i32(width - 1) + i32(height - 1);
-  const float one = 1.0f, zero = 0.0f;
-  const std::string f1(reinterpret_cast<const char*>(&one), 4), f0(reinterpret_cast<const char*>(&zero), 4);
-  std::string exr = i32(20000630) + i32(2) + attr("channels", "chlist", chlist) +
-                    attr("compression", "compression", std::string(1, '\0')) +
-                    attr("dataWindow", "box2i", box) + attr("displayWindow", "box2i", box) +
-                    attr("lineOrder", "lineOrder", std::string(1, '\0')) +
-                    attr("pixelAspectRatio", "float", f1) +
-                    attr("screenWindowCenter", "v2f", f0 + f0) +
-                    attr("screenWindowWidth", "float", f1) + '\0';
-  if (header_only) return exr;
-  std::vector<std::string> lines;
-  for (int y = 0; y < height; ++y) {
-    std::string data;
-    for (const auto& [name, values] : channels) {
-      data.append(reinterpret_cast<const char*>(&values[size_t(y) * width]), size_t(width) * 4);
-    }
-    lines.push_back(i32(y) + i32(int32_t(data.size())) + data);
-  }
-  uint64_t offset = exr.size() + 8 * size_t(height);
-  for (const std::string& line : lines) {
-    exr.append(reinterpret_cast<const char*>(&offset), 8);
-    offset += line.size();
-  }
-  for (const std::string& line : lines) exr += line;
-  return exr;
-}
-
 void WriteBytes(const fs::path& path, const std::string& bytes) {
   fs::create_directories(path.parent_path());
   std::ofstream(path, std::ios::binary) << bytes;
@@ -310,7 +262,7 @@ TEST(BadInputCorpus, Info) {
        [](const fs::path& w) {
          const fs::path json = EditedCapture(w, [](Json& j, const fs::path& d) {
            WriteBytes(d / j["images"][0]["file"].get<std::string>(),
-                      RawExr(200000, 200000, Rgb(1, 1, 0), /*header_only=*/true));
+                      testing::RawExr(200000, 200000, Rgb(1, 1, 0), /*header_only=*/true));
          });
          return "info " + Q(json);
        },
@@ -435,7 +387,7 @@ TEST(BadInputCorpus, Resample) {
            for (Json& image : j["images"]) {
              if (image["camera"] == cam["id"] && image["split"] == "train") {
                WriteBytes(d / image["file"].get<std::string>(),
-                          RawExr(width, height, {{"A", std::vector<float>(size_t(width) * height, 1.0f)}}));
+                          testing::RawExr(width, height, {{"A", std::vector<float>(size_t(width) * height, 1.0f)}}));
                break;
              }
            }
@@ -451,7 +403,7 @@ TEST(BadInputCorpus, Resample) {
            auto planes = Rgb(width, height, 1e-4f);
            planes["G"][5] = std::numeric_limits<float>::quiet_NaN();
            planes["B"][7] = std::numeric_limits<float>::infinity();
-           WriteBytes(d / "var0.exr", RawExr(width, height, planes));
+           WriteBytes(d / "var0.exr", testing::RawExr(width, height, planes));
            for (Json& image : j["images"]) {
              if (image["camera"] == cam["id"] && image["split"] == "train") {
                image["variance"] = "var0.exr";
@@ -556,7 +508,7 @@ TEST(BadInputCorpus, RenderAndValidate) {
        [&](const fs::path& w) {
          const fs::path f = fit(w);
          const auto [width, height] = params_size();
-         WriteBytes(f / "params.exr", RawExr(width, height, Rgb(width, height, 0.5f)));
+         WriteBytes(f / "params.exr", testing::RawExr(width, height, Rgb(width, height, 0.5f)));
          return "render " + Q(TinyCapture()) + " " + Q(f) + " --out " + Q(w / "out") + " --backend cpu";
        },
        kBadInput, {"params.exr", "rho_d.R"}},
@@ -576,7 +528,7 @@ TEST(BadInputCorpus, RenderAndValidate) {
            planes[c] = std::vector<float>(size_t(width) * height, std::numeric_limits<float>::quiet_NaN());
          }
          planes["rho_d.G"].assign(planes["rho_d.G"].size(), std::numeric_limits<float>::infinity());
-         WriteBytes(f / "params.exr", RawExr(width, height, planes));
+         WriteBytes(f / "params.exr", testing::RawExr(width, height, planes));
          return "render " + Q(TinyCapture()) + " " + Q(f) + " --out " + Q(w / "out") + " --backend cpu";
        },
        0, {"params.exr", "non-finite parameters", "render black"}},
@@ -605,7 +557,7 @@ TEST(BadInputCorpus, RenderAndValidate) {
          const fs::path renders = CopyTo(TinyRenders(), w, "renders");
          for (const auto& e : fs::directory_iterator(renders / "images")) {
            if (e.path().extension() == ".exr") {
-             WriteBytes(e.path(), RawExr(5, 7, Rgb(5, 7, 0.25f)));
+             WriteBytes(e.path(), testing::RawExr(5, 7, Rgb(5, 7, 0.25f)));
              break;
            }
          }
@@ -756,7 +708,7 @@ TEST(BadInputCorpus, ImportDiligent) {
          const fs::path d = DiligentObject(w / "ball", 4);
          auto planes = Rgb(8, 8, 0.0f);
          planes["B"].assign(64, std::numeric_limits<float>::quiet_NaN());
-         WriteBytes(d / "normals.exr", RawExr(8, 8, planes));
+         WriteBytes(d / "normals.exr", testing::RawExr(8, 8, planes));
          return "import-diligent " + Q(d) + " --out " + Q(w / "out");
        },
        kBadInput, {"normals.exr", "finite"}},

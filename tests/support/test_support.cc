@@ -116,4 +116,49 @@ bool KillWhen(const std::string& binary, const std::vector<std::string>& args, c
   return WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL;
 }
 
+std::string ShellQuote(const std::string& arg) {
+  std::string quoted = "'";
+  for (char c : arg) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+std::string RawExr(int width, int height, const std::map<std::string, std::vector<float>>& channels,
+                   bool header_only) {
+  auto i32 = [](int32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  auto attr = [&](const std::string& name, const std::string& type, const std::string& body) {
+    return name + '\0' + type + '\0' + i32(int32_t(body.size())) + body;
+  };
+  std::string chlist;
+  for (const auto& [name, values] : channels) {
+    chlist += name + '\0' + i32(2) + std::string(4, '\0') + i32(1) + i32(1);  // FLOAT, 1x1
+  }
+  chlist += '\0';
+  const std::string box = i32(0) + i32(0) + i32(width - 1) + i32(height - 1);
+  const float one = 1.0f, zero = 0.0f;
+  const std::string f1(reinterpret_cast<const char*>(&one), 4), f0(reinterpret_cast<const char*>(&zero), 4);
+  std::string exr = i32(20000630) + i32(2) + attr("channels", "chlist", chlist) +
+                    attr("compression", "compression", std::string(1, '\0')) +
+                    attr("dataWindow", "box2i", box) + attr("displayWindow", "box2i", box) +
+                    attr("lineOrder", "lineOrder", std::string(1, '\0')) +
+                    attr("pixelAspectRatio", "float", f1) +
+                    attr("screenWindowCenter", "v2f", f0 + f0) +
+                    attr("screenWindowWidth", "float", f1) + '\0';
+  if (header_only) return exr;
+  std::vector<std::string> lines;
+  for (int y = 0; y < height; ++y) {
+    std::string data;
+    for (const auto& [name, values] : channels) {
+      data.append(reinterpret_cast<const char*>(&values[size_t(y) * width]), size_t(width) * 4);
+    }
+    lines.push_back(i32(y) + i32(int32_t(data.size())) + data);
+  }
+  uint64_t offset = exr.size() + 8 * size_t(height);
+  for (const std::string& line : lines) {
+    exr.append(reinterpret_cast<const char*>(&offset), 8);
+    offset += line.size();
+  }
+  for (const std::string& line : lines) exr += line;
+  return exr;
+}
+
 }  // namespace reflcap::testing

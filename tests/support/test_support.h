@@ -2,6 +2,7 @@
 // Helpers shared by reflcap's tests: scratch folders and the optional ../shared data.
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -58,5 +59,15 @@ CliResult RunCommand(const std::string& binary, const std::string& args, const S
 bool KillWhen(const std::string& binary, const std::vector<std::string>& args,
               const std::filesystem::path& log, const std::function<bool()>& ready,
               double timeout_s = 60);
+
+// `arg` as one POSIX shell word: in single quotes, an inner quote as '\''.
+std::string ShellQuote(const std::string& arg);
+
+// An uncompressed scanline OpenEXR of FLOAT channels, written byte by byte so that values (NaN,
+// Inf) and header fields (an enormous data window, a missing channel) are exactly as given —
+// WriteExr sanitises what it writes. `channels`: name -> width*height values (row-major); with
+// `header_only` the offset table and pixels are left out (a truncated file).
+std::string RawExr(int width, int height, const std::map<std::string, std::vector<float>>& channels,
+                   bool header_only = false);
 
 }  // namespace reflcap::testing
