@@ -445,7 +445,8 @@ bool SampleBicubic(const Plane& p, double x, double y, double* value, double* dx
 // The local map of a corner: board coordinates s (squares, the corner at 0) -> pixels,
 // pixel = H(s + t), with H a homography through the corner's grid neighbours (held) and the
 // translation t estimated. On a planar board H is the projection itself up to lens distortion,
-// whose bending across one square is below a hundredth of a pixel in our photos.
+// which bends an edge across the window by hundredths of a pixel at most (at the frame's edge),
+// and alike on both sides of the corner.
 struct CornerFrame {
   Eigen::Matrix3d H;
   double square_px = 0;  // pixels per square at the corner, sqrt |det dH/ds|

@@ -96,8 +96,8 @@ struct DetectOptions {
   // in (0, 0.5): at 0.5 the window reaches the neighbouring corners. Default 0.4; see the header
   // comment for the measured trade-off.
   double window_fraction = 0.4;
-  // Gaussian pre-smoothing before cornerSubPix, pixels (0: none, the default). It lowers the
-  // noise but biases: see the header comment.
+  // Gaussian pre-smoothing before either refinement, pixels (0: none, the default). It lowers
+  // cornerSubPix's noise but biases both: see the header comment and bench/RESULTS.md.
   double presmooth_sigma_px = 0;
   int min_half_window = 2;  // pixels, >= 1: below 2 cornerSubPix sees too few gradients
   int max_half_window = 8;  // pixels, >= min_half_window: beyond it noise no longer averages down
