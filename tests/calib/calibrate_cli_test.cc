@@ -62,6 +62,9 @@ TEST(CalibrateCli, UsageErrorsExitWithOne) {
   EXPECT_EQ(RunCli("calibrate turntable x.json --out y.json --min-cos 2", dir).exit_code, 1);
   EXPECT_EQ(RunCli("calibrate turntable x.json --out y.json --intrinsics-params f", dir).exit_code, 1);
   EXPECT_EQ(RunCli("calibrate intrinsics x.json --out y.json --intrinsics-params fx,q", dir).exit_code, 1);
+  const CliResult refiner = RunCli("calibrate intrinsics x.json --out y.json --corner-refiner banana", dir);
+  EXPECT_EQ(refiner.exit_code, 1);
+  EXPECT_NE(refiner.err.find("--corner-refiner"), std::string::npos) << refiner.err;
   const CliResult help = RunCli("calibrate turntable --help", dir);
   EXPECT_EQ(help.exit_code, 0);
   EXPECT_NE(help.out.find("--refine-intrinsics"), std::string::npos);
