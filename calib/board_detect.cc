@@ -605,6 +605,7 @@ bool RefineBySymmetry(const Plane& photo, const CornerFrame& frame, const Detect
       cost = trial_cost;
       jtj = jtj_trial;
       jtr = jtr_trial;
+      // Floor: below 1e-9 the damping is far under double rounding of J^T J's diagonal anyway.
       lambda = std::max(lambda * 0.1, 1e-9);
       settled = (jacobian * step.head<2>()).norm() < kSymmetrySettledPx;
     } else {
