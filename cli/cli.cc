@@ -4,10 +4,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
+
+#include "engine/core/log.h"
 
 namespace reflcap::cli {
 namespace {
@@ -173,6 +176,18 @@ void PrintShardSummary(const std::string& stage, int index, int count, const std
 int ReportError(const std::string& verb, const Status& status) {
   std::fprintf(stderr, "reflcap %s: %s\n", verb.c_str(), status.message().c_str());
   return ExitCodeFor(status);
+}
+
+int TakeGlobalOptions(int argc, char** argv) {
+  int kept = 1;
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--quiet") == 0) {
+      SetLogThreshold(LogLevel::kWarning);
+    } else {
+      argv[kept++] = argv[i];
+    }
+  }
+  return kept;
 }
 
 }  // namespace reflcap::cli

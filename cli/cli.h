@@ -63,6 +63,10 @@ void PrintShardSummary(const std::string& stage, int index, int count, const std
 // Prints `status` as "reflcap <verb>: <message>" on stderr and returns its exit code.
 int ReportError(const std::string& verb, const Status& status);
 
+// Applies the global options (--quiet anywhere: warnings and errors only) and removes them from
+// argv; returns the new argc. Every executable's main calls it before the verb parses.
+int TakeGlobalOptions(int argc, char** argv);
+
 // Verbs.
 int RunInfo(int argc, char** argv);
 int RunSynth(int argc, char** argv);

@@ -1,10 +1,13 @@
 // reflcap: one executable, one verb per stage. See README.md for each verb.
+#include <unistd.h>
+
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <string>
 
 #include "cli/cli.h"
-#include "engine/core/log.h"
 
 namespace {
 
@@ -32,20 +35,26 @@ constexpr char kUsage[] =
     "global options: --quiet (warnings and errors only), --version\n"
     "exit codes: 0 ok, 1 usage error, 2 bad input, 3 backend unavailable, 4 internal error\n";
 
+// Replaces this process with `name` from the folder of this executable, given the same
+// arguments; returns (with a message) only when that fails.
+int ExecSibling(const char* name, char** argv) {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  const std::filesystem::path sibling = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / name;
+  execv(sibling.c_str(), argv);
+  std::fprintf(stderr, "reflcap %s: cannot run %s (%s): it is built beside reflcap (cmake target "
+                       "%s)\n", argv[1], sibling.c_str(), std::strerror(errno), name);
+  return 4;  // internal error: the installation is incomplete
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace reflcap;
+  // Verbs with their own executable get the arguments untouched.
+  if (argc >= 2 && std::strcmp(argv[1], "scan") == 0) return ExecSibling("reflcap-scan", argv);
   // --quiet anywhere applies to every verb; strip it before the verb parses.
-  int kept = 1;
-  for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--quiet") == 0) {
-      SetLogThreshold(LogLevel::kWarning);
-    } else {
-      argv[kept++] = argv[i];
-    }
-  }
-  argc = kept;
+  argc = cli::TakeGlobalOptions(argc, argv);
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0 ||
       std::strcmp(argv[1], "help") == 0) {
     std::printf("%s", kUsage);
@@ -68,7 +77,6 @@ int main(int argc, char** argv) {
   if (verb == "bench") return cli::RunBench(argc, argv);
   if (verb == "calibrate") return cli::RunCalibrate(argc, argv);
   if (verb == "hdr") return cli::RunHdr(argc, argv);
-  if (verb == "scan") return cli::RunScan(argc, argv);
   if (verb == "merge") return cli::RunMerge(argc, argv);
   if (verb == "export") return cli::RunExport(argc, argv);
   if (verb == "view") return cli::RunView(argc, argv);

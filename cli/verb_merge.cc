@@ -19,14 +19,16 @@ int RunMerge(int argc, char** argv) {
   std::vector<std::string> part_names;
   std::string out, samples;
   int threads = 0;
-  bool overwrite = false;
+  bool overwrite = false, link = false;
   ArgParser args(
-      "merge", "PARTS... --out DIR [--samples SAMPLES] [--threads N] [--overwrite]",
+      "merge", "PARTS... --out DIR [--link] [--samples SAMPLES] [--threads N] [--overwrite]",
       "Join the parts written by `reflcap resample|fit|render --shard I/N`\n"
       "(one per shard, N in all) into the folder a single run writes.\n"
       "Resample parts (a shard = the photographs of a range of views) must be of one capture and\n"
       "one set of options; every texel takes the parts' samples in shard order: the store and\n"
-      "maps are bit-identical to a single run's.\n"
+      "maps are bit-identical to a single run's. With --link the store names the parts instead of\n"
+      "holding their samples joined (fit and the other readers join each chunk as they read it:\n"
+      "the same samples, without writing the store once more); the parts must stay in place.\n"
       "Fit parts (a shard = a range of chunks) must be of one sample store (its fingerprint), one\n"
       "set of options and backend; the merge runs the stages that need the whole atlas (lobe\n"
       "transfer, albedo fill, material clusters) and writes params.exr, sigma.exr and status.exr\n"
@@ -40,6 +42,8 @@ int RunMerge(int argc, char** argv) {
   args.AddString("samples", &samples, "SAMPLES",
                  "the sample store the parts were fitted from (default: the path the parts "
                  "record; give it when the store has moved)");
+  args.AddFlag("link", &link,
+               "resample parts: write a linked store that reads the parts' chunks (no copy)");
   args.AddInt("threads", &threads, "worker threads (default 0 = all cores)");
   args.AddFlag("overwrite", &overwrite, "replace DIR if it exists (only once the new one is complete)");
   bool help = false;
@@ -66,6 +70,12 @@ int RunMerge(int argc, char** argv) {
       return ReportError("merge", NotFoundError(part.string(), ": no such part folder"));
     }
   }
+  const bool resample_parts = fs::exists(parts.front() / "resample_part.json", ec);
+  if (link && !resample_parts) {
+    std::fprintf(stderr, "reflcap merge: --link: only resample parts can be linked (%s is not one)\n",
+                 parts.front().c_str());
+    return kExitUsage;
+  }
   if (fs::exists(parts.front() / fit::kFitPartFile, ec)) {
     auto summary = fit::MergeFitParts(parts, out, overwrite, threads, samples);
     if (!summary.ok()) return ReportError("merge", summary.status());
@@ -74,14 +84,14 @@ int RunMerge(int argc, char** argv) {
                 FormatDuration(summary->total_seconds).c_str());
     return 0;
   }
-  if (fs::exists(parts.front() / "resample_part.json", ec)) {
+  if (resample_parts) {
     auto staging = StagingDir::Create(out, overwrite);
     if (!staging.ok()) return ReportError("merge", staging.status());
-    auto summary = resample::MergeResampleParts(parts, staging->path(), threads);
+    auto summary = resample::MergeResampleParts(parts, staging->path(), threads, link);
     if (!summary.ok()) return ReportError("merge", summary.status());
     if (Status s = staging->Commit(); !s.ok()) return ReportError("merge", s);
-    std::printf("merged %zu resample parts into %s\n%s", parts.size(), out.c_str(),
-                summary->text.c_str());
+    std::printf("%s %zu resample parts into %s\n%s", link ? "linked" : "merged", parts.size(),
+                out.c_str(), summary->text.c_str());
     return 0;
   }
   if (fs::exists(parts.front() / "render_report.json", ec)) {

@@ -135,13 +135,17 @@ int RunResample(int argc, char** argv) {
   // Read and check the whole capture before anything is created on disk.
   auto capture = ReadCapture(capture_path);
   if (!capture.ok()) return ReportError("resample", capture.status());
-  if (Status s = ValidateCaptureFiles(*capture, nullptr); !s.ok()) {
+  // A shard checks the photographs it reads (the other shards check theirs).
+  auto images = resample::ImagesOfShard(*capture, options);
+  if (!images.ok()) return ReportError("resample", images.status());
+  CaptureFilesReport files;
+  if (Status s = ValidateCaptureFiles(*capture, &files, &*images); !s.ok()) {
     return ReportError("resample", s);
   }
   auto staging = StagingDir::Create(out, overwrite);
   if (!staging.ok()) return ReportError("resample", staging.status());
   if (!no_checkpoint) options.checkpoint_dir = CheckpointDir(staging->destination());
-  auto summary = resample::ResampleCapture(*capture, options, staging->path());
+  auto summary = resample::ResampleCapture(*capture, options, staging->path(), files.mesh.get());
   if (!summary.ok()) return ReportError("resample", summary.status());
   if (Status s = staging->Commit(); !s.ok()) return ReportError("resample", s);
   if (!options.checkpoint_dir.empty()) {
@@ -150,9 +154,15 @@ int RunResample(int argc, char** argv) {
     if (ec) REFLCAP_LOG(kWarning) << options.checkpoint_dir.string() << ": cannot remove: " << ec.message();
   }
   std::printf("%s", summary->text.c_str());
-  std::printf("  sample store %s; report %s; coverage %s\n", out.c_str(),
-              (fs::path(out) / "resample_report.json").string().c_str(),
-              (fs::path(out) / "coverage.png").string().c_str());
+  if (options.shard.count > 1) {
+    // A part writes no maps (the merge writes them from every part's coverage.bin).
+    std::printf("  part %s; report %s\n", out.c_str(),
+                (fs::path(out) / "resample_report.json").string().c_str());
+  } else {
+    std::printf("  sample store %s; report %s; coverage %s\n", out.c_str(),
+                (fs::path(out) / "resample_report.json").string().c_str(),
+                (fs::path(out) / "coverage.png").string().c_str());
+  }
   if (options.shard.count > 1) {
     PrintShardSummary("resample", options.shard.index, options.shard.count, out, summary->seconds,
                       {{"images", double(summary->images)},

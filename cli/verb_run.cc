@@ -66,7 +66,8 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
                                       const PipelineOptions& options) {
   PipelineSummary summary;
   REFLCAP_ASSIGN_OR_RETURN(Capture capture, ReadCapture(capture_path));
-  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, nullptr));
+  CaptureFilesReport files;
+  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, &files));
   if (capture.CountSplit(Split::kHoldout) == 0) {
     return FailedPreconditionError(capture.json_path.string(),
                                    ": images: no holdout photograph to validate against");
@@ -80,7 +81,9 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   resample_options.split = resample::SplitSelection::kTrain;
   fs::create_directories(dir / "samples");
   REFLCAP_ASSIGN_OR_RETURN(resample::ResampleSummary resampled,
-                           resample::ResampleCapture(capture, resample_options, dir / "samples"));
+                           resample::ResampleCapture(capture, resample_options, dir / "samples",
+                                                     files.mesh.get()));
+  files.mesh.reset();  // the render loads what it needs
   summary.resample_s = SecondsSince(start);
   summary.texels = resampled.texels;
 

@@ -150,6 +150,37 @@ Json CheckpointIdentity(const Capture& capture, const ResampleOptions& options,
 
 }  // namespace
 
+ImageOrder OrderImages(const Capture& capture, SplitSelection split) {
+  ImageOrder out;
+  std::map<std::pair<int, double>, int> view_ids;
+  for (size_t i = 0; i < capture.images.size(); ++i) {
+    const CaptureImage& image = capture.images[i];
+    if (!Selected(image, split)) continue;
+    if (capture.normal_map.has_value() && image.camera != capture.normal_map->camera) {
+      ++out.skipped;
+      continue;
+    }
+    auto [it, inserted] = view_ids.try_emplace({image.camera, image.turntable_deg}, int(view_ids.size()));
+    out.order.push_back({it->second, uint32_t(i)});
+  }
+  std::stable_sort(out.order.begin(), out.order.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  out.views = uint32_t(view_ids.size());
+  return out;
+}
+
+StatusOr<std::vector<bool>> ImagesOfShard(const Capture& capture, const ResampleOptions& options) {
+  const ImageOrder ordered = OrderImages(capture, options.split);
+  std::vector<bool> take(capture.images.size(), options.shard.count <= 1);
+  if (options.shard.count <= 1) return take;
+  REFLCAP_ASSIGN_OR_RETURN(ItemRange views, ShardRange(options.shard, ordered.views,
+                                                       "views (camera x turntable poses)"));
+  for (const auto& [view, image] : ordered.order) {
+    if (uint32_t(view) >= views.begin && uint32_t(view) < views.end) take[image] = true;
+  }
+  return take;
+}
+
 StatusOr<Backend> ParseBackend(const std::string& name) {
   if (name == "cpu") return Backend::kCpu;
   if (name == "vulkan") return Backend::kVulkan;
@@ -216,12 +247,13 @@ StatusOr<ResampleSummary> ResampleCapture(const fs::path& capture_path,
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   REFLCAP_RETURN_IF_ERROR(BackendAvailable(options.backend, options.device));
   REFLCAP_ASSIGN_OR_RETURN(Capture capture, ReadCapture(capture_path));
-  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, nullptr));
-  return ResampleCapture(capture, options, out_dir);
+  CaptureFilesReport files;
+  REFLCAP_RETURN_IF_ERROR(ValidateCaptureFiles(capture, &files));
+  return ResampleCapture(capture, options, out_dir, files.mesh.get());
 }
 
 StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const ResampleOptions& options,
-                                          const fs::path& out_dir) {
+                                          const fs::path& out_dir, const TriangleMesh* given_mesh) {
   const auto start = Clock::now();
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   const std::string file = original.json_path.string();
@@ -234,20 +266,24 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
 
   // ---- Geometry -------------------------------------------------------------------------------
   TexelAtlas atlas;
-  TriangleMesh mesh_data;
+  TriangleMesh loaded_mesh;              // when the caller gave none
+  const TriangleMesh* mesh_data = given_mesh;
   std::unique_ptr<RayScene> scene;
   std::string atlas_source;
   const bool normal_map = capture.normal_map.has_value();
   std::unique_ptr<HeightField> height_field;  // normal-map captures with height_shadows
   std::string height_field_note;
   if (!normal_map) {
-    auto mesh = LoadMesh(capture.Resolve(capture.mesh));
-    if (!mesh.ok()) return Status(mesh.status().code(), StrCat(file, ": mesh: ", mesh.status().message()));
+    if (mesh_data == nullptr) {
+      auto mesh = LoadMesh(capture.Resolve(capture.mesh));
+      if (!mesh.ok()) return Status(mesh.status().code(), StrCat(file, ": mesh: ", mesh.status().message()));
+      loaded_mesh = std::move(*mesh);
+      mesh_data = &loaded_mesh;
+    }
     int w, h;
     AtlasSize(capture, options.atlas_resolution, &w, &h, &atlas_source);
-    REFLCAP_ASSIGN_OR_RETURN(atlas, BuildTexelAtlas(*mesh, w, h));
-    REFLCAP_ASSIGN_OR_RETURN(scene, RayScene::Create(*mesh));
-    mesh_data = std::move(*mesh);
+    REFLCAP_ASSIGN_OR_RETURN(atlas, BuildTexelAtlas(*mesh_data, w, h));
+    REFLCAP_ASSIGN_OR_RETURN(scene, RayScene::Create(*mesh_data));
   } else {
     if (options.atlas_resolution > 0) {
       REFLCAP_LOG(kWarning) << "--atlas-res is ignored: the texels of a normal-map capture are its "
@@ -308,7 +344,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   if (options.backend == Backend::kVulkan && !normal_map) {
     VulkanMaskOptions mo;
     mo.device = options.device;
-    REFLCAP_ASSIGN_OR_RETURN(masks, VulkanMasks::Create(capture, atlas, mesh_data,
+    REFLCAP_ASSIGN_OR_RETURN(masks, VulkanMasks::Create(capture, atlas, *mesh_data,
                                                         scene->SurfaceOffset(), noise.model,
                                                         options.min_cos, mo));
     device = masks->device_name();
@@ -323,19 +359,9 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   VulkanMaskStats mask_stats;
 
   // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
-  std::map<std::pair<int, double>, int> view_ids;
-  std::vector<std::pair<int, uint32_t>> order;  // (view, image index)
-  size_t skipped = 0;
-  for (size_t i = 0; i < capture.images.size(); ++i) {
-    const CaptureImage& image = capture.images[i];
-    if (!Selected(image, options.split)) continue;
-    if (normal_map && image.camera != capture.normal_map->camera) {
-      ++skipped;
-      continue;
-    }
-    auto [it, inserted] = view_ids.try_emplace({image.camera, image.turntable_deg}, int(view_ids.size()));
-    order.push_back({it->second, uint32_t(i)});
-  }
+  ImageOrder ordered = OrderImages(capture, options.split);
+  std::vector<std::pair<int, uint32_t>>& order = ordered.order;  // (view, image index)
+  const size_t skipped = ordered.skipped;
   if (skipped > 0) {
     REFLCAP_LOG(kWarning) << skipped << " selected images are not from the normal map's camera "
                           << "and were skipped";
@@ -345,11 +371,9 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                    SplitSelectionName(options.split), "\"",
                                    skipped ? " from the normal map's camera" : "");
   }
-  std::stable_sort(order.begin(), order.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
   // A shard keeps the photographs of its views (contiguous in `order`, which is grouped by view).
   const std::vector<std::pair<int, uint32_t>> all_order = order;
-  const uint32_t views_total = uint32_t(view_ids.size());
+  const uint32_t views_total = ordered.views;
   const bool sharded = options.shard.count > 1;
   ItemRange view_range{0, views_total};
   if (sharded) {
@@ -721,7 +745,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   REFLCAP_ASSIGN_OR_RETURN(Counted counted,
                            WriteCountedOutputs(out_dir, atlas, coverage, tally, order.size(),
-                                               info.samples, &report));
+                                               info.samples, &report, /*write_maps=*/!sharded));
   report["timings"]["outputs_s"] = Seconds(t0);
   report["timings"]["total_s"] = Seconds(start);
   if (sharded) {

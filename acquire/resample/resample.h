@@ -155,9 +155,27 @@ struct ResampleSummary {
 StatusOr<ResampleSummary> ResampleCapture(const std::filesystem::path& capture_path,
                                           const ResampleOptions& options,
                                           const std::filesystem::path& out_dir);
-// The same for a capture already read and checked with ReadCapture and ValidateCaptureFiles.
+// The same for a capture already read and checked with ReadCapture and ValidateCaptureFiles;
+// `mesh`, when given, is the capture's mesh as ValidateCaptureFiles loaded it (else it is
+// loaded again).
 StatusOr<ResampleSummary> ResampleCapture(const Capture& capture, const ResampleOptions& options,
-                                          const std::filesystem::path& out_dir);
+                                          const std::filesystem::path& out_dir,
+                                          const TriangleMesh* mesh = nullptr);
+
+// The photographs a run takes from `capture` for `split`, in the order it takes them: grouped by
+// view (camera, turntable angle; view ids in order of first appearance), ascending image index
+// within a view; `views` views in all. A normal-map capture takes only its camera's photographs
+// (`skipped`: the others).
+struct ImageOrder {
+  std::vector<std::pair<int, uint32_t>> order;  // (view, image index)
+  uint32_t views = 0;
+  size_t skipped = 0;
+};
+ImageOrder OrderImages(const Capture& capture, SplitSelection split);
+// Which of the capture's images the run of `options` reads (one flag per image): all of them
+// without a shard; a shard's views' photographs with one. InvalidArgument for a shard beyond
+// the views.
+StatusOr<std::vector<bool>> ImagesOfShard(const Capture& capture, const ResampleOptions& options);
 
 // `reflcap merge` of resample parts: checks that `parts` are the shards 0..N-1 of one resample
 // (the same capture bytes, options, atlas and photographs; each shard once; their views tiling
@@ -165,9 +183,14 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& capture, const Resample
 // maps and report one run writes: every chunk's texels take the parts' samples in shard order,
 // so chunks, store.json, atlas.bin and the maps are bit-identical to a single run's (the report
 // differs in timings and says `shards`). `threads` chunks are joined at a time (0 = all cores).
+// With `link` (`merge --link`), no chunk is written: the store is a linked one
+// (sample_store.h) whose store.json names the parts (absolute paths, with their fingerprints)
+// and whose readers join each chunk as they read it: the same samples as the joined store's,
+// without reading and writing them all once more; the parts must then stay where they are.
 // FailedPrecondition naming the part and field for parts
 // that do not belong together; NotFound/DataLoss naming a missing or corrupt file.
 StatusOr<ResampleSummary> MergeResampleParts(const std::vector<std::filesystem::path>& parts,
-                                             const std::filesystem::path& out_dir, int threads = 0);
+                                             const std::filesystem::path& out_dir, int threads = 0,
+                                             bool link = false);
 
 }  // namespace reflcap::resample

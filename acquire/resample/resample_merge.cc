@@ -78,7 +78,7 @@ StatusOr<Part> ReadPart(const fs::path& dir) {
 }  // namespace
 
 StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
-                                             const fs::path& out_dir, int threads) {
+                                             const fs::path& out_dir, int threads, bool link) {
   const auto start = std::chrono::steady_clock::now();
   if (dirs.empty()) return InvalidArgumentError("merge: no parts given");
   std::vector<Part> parts;
@@ -153,37 +153,33 @@ StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
                                parts[size_t(of_shard[size_t(s)])].store->ReadChunk(c));
       pieces.push_back(std::move(piece));
     }
-    TexelSampleChunk merged;
-    merged.first_texel = pieces.front().first_texel;
-    merged.texel_count = pieces.front().texel_count;
-    size_t total = 0;
-    for (const auto& piece : pieces) total += piece.samples.size();
-    merged.samples.reserve(total);
-    merged.offsets.reserve(size_t(merged.texel_count) + 1);
-    merged.offsets.push_back(0);
-    for (uint32_t i = 0; i < merged.texel_count; ++i) {
-      for (const auto& piece : pieces) {
-        merged.samples.insert(merged.samples.end(), piece.samples.begin() + piece.offsets[i],
-                              piece.samples.begin() + piece.offsets[i + 1]);
-      }
-      merged.offsets.push_back(merged.samples.size());
-    }
+    REFLCAP_ASSIGN_OR_RETURN(const TexelSampleChunk merged, JoinSampleChunks(pieces));
     samples += merged.samples.size();
     return WriteSampleChunk(out_dir / SampleChunkFileName(c), merged);
   };
-  ParallelFor(
-      0, base.chunks, 1,
-      [&](int64_t b, int64_t e, int) {
-        for (int64_t c = b; c < e && !failed; ++c) {
-          Status st = merge_chunk(uint32_t(c));
-          if (!st.ok()) {
-            std::lock_guard<std::mutex> lock(mutex);
-            if (first_error.ok()) first_error = st;
-            failed = true;
+  if (link) {
+    // The parts stay where they are; the store names them in shard order.
+    for (int s = 0; s < first.shard.count; ++s) {
+      const Part& p = parts[size_t(of_shard[size_t(s)])];
+      const fs::path dir = fs::absolute(p.dir).lexically_normal();
+      info.parts.push_back({dir.string(), p.store->fingerprint()});
+      samples += p.store->info().samples;
+    }
+  } else {
+    ParallelFor(
+        0, base.chunks, 1,
+        [&](int64_t b, int64_t e, int) {
+          for (int64_t c = b; c < e && !failed; ++c) {
+            Status st = merge_chunk(uint32_t(c));
+            if (!st.ok()) {
+              std::lock_guard<std::mutex> lock(mutex);
+              if (first_error.ok()) first_error = st;
+              failed = true;
+            }
           }
-        }
-      },
-      threads);
+        },
+        threads);
+  }
   REFLCAP_RETURN_IF_ERROR(first_error);
   info.samples = samples;
   REFLCAP_RETURN_IF_ERROR(WriteSampleStoreInfo(out_dir, info));
@@ -241,7 +237,7 @@ StatusOr<ResampleSummary> MergeResampleParts(const std::vector<fs::path>& dirs,
                        {"texel_image_pairs_per_s",
                         tally.resample_s > 0 ? double(counted.pairs) / tally.resample_s : 0.0}};
   report["store"]["spilled_bytes"] = spilled;
-  report["shards"] = {{"count", first.shard.count}, {"parts", shards}};
+  report["shards"] = {{"count", first.shard.count}, {"parts", shards}, {"linked", link}};
   const std::string report_text = report.dump(2) + "\n";
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "resample_report.json", report_text));
 

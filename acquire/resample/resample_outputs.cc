@@ -119,13 +119,16 @@ void Tally::Add(const Tally& o) {
 // count disagrees with the samples written.
 StatusOr<Counted> WriteCountedOutputs(const fs::path& out_dir, const TexelAtlas& atlas,
                                       const TexelCoverage& coverage, const Tally& tally,
-                                      uint64_t images, uint64_t samples_written, Json* report) {
+                                      uint64_t images, uint64_t samples_written, Json* report,
+                                      bool write_maps) {
   Counted counted;
-  Image samples_map(atlas.width, atlas.height, 1, 0.0f);
+  // Without maps, 1x1 images that nothing writes (the loop below fills them only with maps).
+  Image samples_map(write_maps ? atlas.width : 1, write_maps ? atlas.height : 1, 1, 0.0f);
   // domain.exr channels, in OpenEXR's (alphabetical) order.
   const std::vector<std::string> domain_names = {"cells", "min_half_angle_deg", "observations",
                                                  "samples", "seen", "views"};
-  Image domain_map(atlas.width, atlas.height, int(domain_names.size()), 0.0f);
+  Image domain_map(write_maps ? atlas.width : 1, write_maps ? atlas.height : 1,
+                   int(domain_names.size()), 0.0f);
   std::vector<double> samples_seen, cells_seen, views_seen, observations_seen;
   uint64_t texels_seen = 0, texels_with_samples = 0, texels_observed = 0, observations = 0;
   std::array<uint64_t, std::size(kSampleThresholds)> at_least{}, observed_at_least{},
@@ -148,17 +151,19 @@ StatusOr<Counted> WriteCountedOutputs(const fs::path& out_dir, const TexelAtlas&
   };
   std::array<Group, kViewGroups> groups{};
   for (size_t t = 0; t < atlas.TexelCount(); ++t) {
-    const size_t pixel = atlas.pixel_of_texel[t];
     const uint32_t n = coverage.samples(t);
-    samples_map.data[pixel] = float(n);
-    float* d = &domain_map.data[pixel * domain_names.size()];
     const uint32_t o = coverage.observations(t);
-    d[0] = float(coverage.cells(t));
-    d[1] = coverage.min_half_angle_deg(t);
-    d[2] = float(o);
-    d[3] = float(n);
-    d[4] = coverage.seen(t) ? 1.0f : 0.0f;
-    d[5] = float(coverage.views(t));
+    if (write_maps) {
+      const size_t pixel = atlas.pixel_of_texel[t];
+      samples_map.data[pixel] = float(n);
+      float* d = &domain_map.data[pixel * domain_names.size()];
+      d[0] = float(coverage.cells(t));
+      d[1] = coverage.min_half_angle_deg(t);
+      d[2] = float(o);
+      d[3] = float(n);
+      d[4] = coverage.seen(t) ? 1.0f : 0.0f;
+      d[5] = float(coverage.views(t));
+    }
     texels_with_samples += n > 0;
     texels_observed += o > 0;
     observations += o;
@@ -183,9 +188,11 @@ StatusOr<Counted> WriteCountedOutputs(const fs::path& out_dir, const TexelAtlas&
     g.cells += coverage.cells(t);
     g.near_specular += coverage.min_half_angle_deg(t) < kNearSpecularTableDeg;
   }
-  REFLCAP_RETURN_IF_ERROR(WriteExr(out_dir / "coverage.exr", samples_map));
-  REFLCAP_RETURN_IF_ERROR(WriteExrChannels(out_dir / "domain.exr", domain_map, domain_names));
-  REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "coverage.png", CoveragePng(atlas, coverage)));
+  if (write_maps) {
+    REFLCAP_RETURN_IF_ERROR(WriteExr(out_dir / "coverage.exr", samples_map));
+    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(out_dir / "domain.exr", domain_map, domain_names));
+    REFLCAP_RETURN_IF_ERROR(WritePng(out_dir / "coverage.png", CoveragePng(atlas, coverage)));
+  }
 
   const uint64_t kept = tally.outcome_counts[size_t(Outcome::kKept)];
   std::array<uint64_t, kReasonCount>& reasons = counted.reasons;

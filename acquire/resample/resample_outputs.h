@@ -42,14 +42,15 @@ struct Counted {
   std::array<uint64_t, kReasonCount> reasons{};
 };
 
-// Writes coverage.exr, domain.exr and coverage.png from `coverage`, and sets every field of
-// `report` that depends on the photographs' outcomes (counts, distributions, the domain, rays,
-// the noise model's variance-image counts); the caller sets the rest. Internal when the kept
-// count disagrees with the samples written.
+// Writes coverage.exr, domain.exr and coverage.png from `coverage` (unless !write_maps: a
+// shard's part, whose maps the merge writes), and sets every field of `report` that depends on
+// the photographs' outcomes (counts, distributions, the domain, rays, the noise model's
+// variance-image counts); the caller sets the rest. Internal when the kept count disagrees with
+// the samples written.
 StatusOr<Counted> WriteCountedOutputs(const std::filesystem::path& out_dir, const TexelAtlas& atlas,
                                       const TexelCoverage& coverage, const Tally& tally,
                                       uint64_t images, uint64_t samples_written,
-                                      nlohmann::json* report);
+                                      nlohmann::json* report, bool write_maps = true);
 
 // The few lines `reflcap resample` prints, from the report.
 std::string SummaryText(const nlohmann::json& report, double seconds);

@@ -357,7 +357,8 @@ StatusOr<Capture> ReadCapture(const fs::path& json_path) {
   return ParseCapture(text, file);
 }
 
-Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) {
+Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report,
+                            const std::vector<bool>* images) {
   const std::string file = capture.json_path.string();
   auto field_error = [&](const std::string& field, const Status& cause) {
     return Status(cause.code(), StrCat(file, ": ", field, ": ", cause.message()));
@@ -371,6 +372,7 @@ Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) 
     out.mesh_vertices = mesh->positions.size();
     out.mesh_triangles = mesh->triangles.size();
     out.mesh_degenerate_skipped = stats.degenerate_skipped;
+    out.mesh = std::make_shared<const TriangleMesh>(std::move(*mesh));
   } else {
     const NormalMapGeometry& g = *capture.normal_map;
     const Camera& cam = capture.cameras[g.camera];
@@ -393,6 +395,7 @@ Status ValidateCaptureFiles(const Capture& capture, CaptureFilesReport* report) 
     out.normal_map_texels = count;
   }
   for (size_t i = 0; i < capture.images.size(); ++i) {
+    if (images != nullptr && (i >= images->size() || !(*images)[i])) continue;
     const CaptureImage& image = capture.images[i];
     const std::string field = StrCat("images[", i, "].file");
     auto info = ReadImageInfo(capture.Resolve(image.file));

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <system_error>
 #include <utility>
@@ -55,12 +56,20 @@ Status WriteTextFileAtomic(const fs::path& path, const std::string& contents) {
 }
 
 StatusOr<std::string> ReadTextFile(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return NotFoundError(path.string(), ": cannot open file");
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) return DataLossError(path.string(), ": read failed");
-  return buffer.str();
+  // Read in blocks straight into the string (a stringstream copy took ~12 ms for a 4 MB
+  // atlas.bin, read by every fit shard for each part of a linked store); the size is a hint
+  // only, so a file that grows or a pipe still reads whole.
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (!f) return NotFoundError(path.string(), ": cannot open file");
+  std::error_code ec;
+  const uintmax_t hint = fs::file_size(path, ec);
+  std::string bytes;
+  if (!ec) bytes.reserve(size_t(hint));
+  char block[1 << 16];
+  size_t got;
+  while ((got = std::fread(block, 1, sizeof block, f.get())) > 0) bytes.append(block, got);
+  if (std::ferror(f.get())) return DataLossError(path.string(), ": read failed");
+  return bytes;
 }
 
 StatusOr<StagingDir> StagingDir::Create(const fs::path& destination, bool overwrite) {

@@ -61,12 +61,6 @@ T Take(const uint8_t** at) {
   return value;
 }
 
-std::string Hex(uint32_t v) {
-  char buf[9];
-  std::snprintf(buf, sizeof buf, "%08" PRIx32, v);
-  return buf;
-}
-
 }  // namespace
 
 StatusOr<ChunkRange> ShardChunks(Shard shard, uint32_t chunks) {
@@ -322,16 +316,6 @@ Status FitOptionsFromJson(const Json& json, const std::string& file, FitOptions*
   const Status valid = o->Validate();
   if (!valid.ok()) return DataLossError(file, ": options: ", valid.message());
   return OkStatus();
-}
-
-StatusOr<std::string> SampleStoreFingerprint(const fs::path& samples) {
-  std::string out;
-  for (const char* name : {"store.json", "atlas.bin"}) {
-    REFLCAP_ASSIGN_OR_RETURN(std::string bytes, ReadTextFile(samples / name));
-    if (!out.empty()) out += "-";
-    out += Hex(Crc32(bytes.data(), bytes.size()));
-  }
-  return out;
 }
 
 Json FitPartManifest::ToJson() const {

@@ -80,9 +80,6 @@ StatusOr<std::vector<TexelFit>> ReadFitChunk(const std::filesystem::path& path,
 nlohmann::json FitOptionsToJson(const FitOptions& options);
 Status FitOptionsFromJson(const nlohmann::json& json, const std::string& file, FitOptions* options);
 
-// Identity of a sample store: CRC-32 of store.json and of atlas.bin, as "xxxxxxxx-xxxxxxxx".
-// Parts and checkpoints of one store carry the same; the chunk files are checked one by one.
-StatusOr<std::string> SampleStoreFingerprint(const std::filesystem::path& samples);
 
 // What a checkpoint or part is of: written as checkpoint.json / fit_part.json.
 struct FitPartManifest {

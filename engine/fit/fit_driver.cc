@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -18,6 +19,7 @@
 
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
+#include "engine/core/parallel.h"
 #include "engine/core/progress.h"
 #include "engine/fit/albedo_fill.h"
 #include "engine/fit/lobe_transfer.h"
@@ -221,6 +223,8 @@ uint32_t ChunkTexelCount(const SampleStoreInfo& info, uint32_t c) {
 
 // Stores one chunk's results in the pass.
 Status Keep(uint32_t first_texel, const std::vector<TexelFit>& results, FitPass* pass) {
+  // A shard's pass keeps nothing: its results are the chunk result files it writes.
+  if (pass->fits == nullptr) return OkStatus();
   for (size_t i = 0; i < results.size(); ++i) pass->fits->Set(first_texel + i, results[i]);
   return pass->sigma->Write(first_texel, results);
 }
@@ -260,8 +264,9 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
   FitOptions iso_options = options;
   iso_options.lobe_model = LobeModel::kIso;
-  const bool keep_chunks =
-      (options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0;
+  // Kept only for a post-fit phase in this process (not by a shard: its merge reads the store).
+  const bool keep_chunks = (options.lobe_transfer.enabled || options.clusters.enabled) &&
+                           options.lobes > 0 && pass->cached.size() == info.chunks;
   const uint64_t cache_budget = keep_chunks ? SampleCacheBudget() : 0;
   std::vector<TexelFit> results, iso_results;
   auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
@@ -651,7 +656,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   }
   FitPartManifest manifest;
   manifest.samples = fs::absolute(samples).lexically_normal().string();
-  REFLCAP_ASSIGN_OR_RETURN(manifest.fingerprint, SampleStoreFingerprint(samples));
+  manifest.fingerprint = store->fingerprint();
   manifest.texels = info.texels;
   manifest.chunks = info.chunks;
   manifest.chunk_texels = info.chunk_texels;
@@ -669,11 +674,15 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
 
   // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
   // unknown sigmas.
+  // A shard keeps no per-texel state (82 bytes a texel for the whole atlas, and the sigma spill):
+  // its part is the chunk result files.
   FitPass pass;
-  pass.fits = std::make_unique<FitStore>(info.texels, options.lobes);
-  REFLCAP_ASSIGN_OR_RETURN(pass.sigma, SigmaSpill::Create(staging.path() / kSigmaScratchFile,
-                                                          info.texels, options.lobes));
-  pass.cached.resize(info.chunks);
+  if (!sharded) {
+    pass.fits = std::make_unique<FitStore>(info.texels, options.lobes);
+    REFLCAP_ASSIGN_OR_RETURN(pass.sigma, SigmaSpill::Create(staging.path() / kSigmaScratchFile,
+                                                            info.texels, options.lobes));
+    pass.cached.resize(info.chunks);
+  }
   const std::string device = fitter->device();
   REFLCAP_RETURN_IF_ERROR(
       FitChunks(*store, range, fitter.get(), options, checkpoint, control.resume, &pass));
@@ -684,8 +693,6 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
 
   if (sharded) {
     // The part: the checkpoint's chunk result files and the manifest with what this shard did.
-    pass.cached = {};
-    pass.sigma.reset();
     Json part = manifest.ToJson();
     part["device"] = device;
     part["fitted_chunks"] = pass.fitted_chunks;
@@ -702,7 +709,6 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
                              staging.path().string(), ": ", ec.message());
       }
     }
-    fs::remove(staging.path() / kSigmaScratchFile, ec);
     REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(staging.path() / kFitPartFile, part.dump(2) + "\n"));
     REFLCAP_RETURN_IF_ERROR(staging.Commit());
     fs::remove_all(checkpoint, ec);
@@ -781,7 +787,7 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
   // The store the parts were fitted from (its chunks feed lobe transfer and the clusters).
   const fs::path samples = samples_override.empty() ? fs::path(first.samples) : samples_override;
   REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store, SampleStoreReader::Open(samples));
-  REFLCAP_ASSIGN_OR_RETURN(std::string fingerprint, SampleStoreFingerprint(samples));
+  const std::string& fingerprint = store->fingerprint();
   if (fingerprint != first.fingerprint) {
     return FailedPreconditionError(samples.string(), ": store_fingerprint ", fingerprint,
                                    " is not the ", first.fingerprint, " the parts were fitted from");
@@ -801,8 +807,44 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
   REFLCAP_ASSIGN_OR_RETURN(pass.sigma, SigmaSpill::Create(staging.path() / kSigmaScratchFile,
                                                           info.texels, options.lobes));
   pass.cached.resize(info.chunks);
+  // Lobe transfer and the clusters test texels on their own samples, which a single run kept
+  // from its fit pass: read the store's chunks (within the cache budget) while the parts' result
+  // files are read, so that the transfer finds them in memory. A chunk that fails to read here
+  // is left for the transfer to read again and report.
+  std::atomic<bool> stop_prefetch{false};
+  std::future<uint64_t> prefetch;
+  if ((options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0) {
+    // On every core: reading is the merge's critical path here (the parts' files are small).
+    prefetch = std::async(std::launch::async, [&store, &pass, &stop_prefetch, &info, threads]() {
+      const uint64_t budget = SampleCacheBudget();
+      std::atomic<uint64_t> bytes{0};
+      ParallelFor(
+          0, info.chunks, 1,
+          [&](int64_t b, int64_t e, int) {
+            for (int64_t c = b; c < e && !stop_prefetch; ++c) {
+              StatusOr<TexelSampleChunk> chunk = store->ReadChunk(uint32_t(c));
+              if (!chunk.ok()) continue;
+              const uint64_t size = chunk->samples.size() * sizeof(BrdfSample) +
+                                    chunk->offsets.size() * sizeof(uint64_t);
+              if (bytes.fetch_add(size) + size > budget) {  // over budget: not kept
+                bytes -= size;
+                continue;
+              }
+              pass.cached[size_t(c)] = std::move(chunk).value();
+            }
+          },
+          threads);
+      return bytes.load();
+    });
+  }
+  // Stops the prefetch on an early return (the future's destructor then waits for it).
+  struct StopOnExit {
+    std::atomic<bool>* stop;
+    ~StopOnExit() { *stop = true; }
+  } stop_on_exit{&stop_prefetch};
   Json shard_list = Json::array();
   std::string device;
+  const auto parts_start = std::chrono::steady_clock::now();
   for (int s = 0; s < first.shard.count; ++s) {
     const size_t i = size_t(part_of_shard[size_t(s)]);
     const Json& j = part_json[i];
@@ -831,7 +873,14 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
                           {"device", part_device},
                           {"fit_s", fit_s}});
   }
-  Json extra = {{"shards", {{"count", first.shard.count}, {"parts", shard_list}}}};
+  const double parts_read_s = Seconds(parts_start);
+  const auto wait_start = std::chrono::steady_clock::now();
+  if (prefetch.valid()) pass.cached_bytes = prefetch.get();
+  Json extra = {{"shards",
+                 {{"count", first.shard.count},
+                  {"parts", shard_list},
+                  {"parts_read_s", parts_read_s},
+                  {"store_prefetch_wait_s", Seconds(wait_start)}}}};
   REFLCAP_ASSIGN_OR_RETURN(FitRunSummary summary,
                            FinishFit(samples, *store, atlas, options, first.backend, device, "",
                                      &pass, staging.path(), extra, start));

@@ -20,6 +20,7 @@
 #include "engine/fit/vulkan_fitter.h"
 
 #include <algorithm>
+#include <filesystem>
 #include <chrono>
 #include <cstring>
 #include <future>
@@ -840,8 +841,35 @@ StatusOr<std::unique_ptr<VulkanFitter>> CreateVulkanFitter(const VulkanFitterOpt
                                                             std::move(kernels), options));
 }
 
+namespace {
+
+// Whether the machine has a GPU's device node: DRM render or card nodes (Mesa's and AMD's
+// drivers), NVIDIA's, or WSL's. A hardware Vulkan device needs one; without any, the probe below
+// would only load every installed driver (Debian's mesa-vulkan-drivers: four, 25-50 ms per
+// process, paid by each shard of a batch fit) to find at most lavapipe, which `auto` does not
+// choose.
+bool GpuDeviceNodePresent() {
+  std::error_code ec;
+  for (const char* node : {"/dev/nvidiactl", "/dev/nvidia0", "/dev/dxg"}) {
+    if (std::filesystem::exists(node, ec)) return true;
+  }
+  for (const auto& entry : std::filesystem::directory_iterator("/dev/dri", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("renderD", 0) == 0 || name.rfind("card", 0) == 0) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 StatusOr<AutoBackendChoice> ChooseAutoBackend(const std::string& device) {
   AutoBackendChoice choice;
+  if (device.empty() && !GpuDeviceNodePresent()) {
+    choice.backend = Backend::kCpu;
+    choice.reason = "no GPU on this machine (no /dev/dri render or card node, no /dev/nvidia*): "
+                    "fitting on the CPU";
+    return choice;
+  }
   StatusOr<std::vector<gpu::DeviceInfo>> devices = gpu::ListDevices();
   if (!devices.ok()) {
     if (!device.empty()) {

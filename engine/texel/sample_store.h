@@ -8,6 +8,9 @@
 //   SAMPLES/resample_report.json, coverage.exr, coverage.png, domain.exr   (the resampler's
 //                               report and maps; see acquire/resample/resample.h)
 //
+// A linked store (`reflcap merge --link` of a sharded resample) holds store.json and atlas.bin
+// only; store.json's `parts` names the part stores whose chunks it joins as it reads them.
+//
 // Chunks hold a fixed number of consecutive texels (the last may hold fewer); every file is
 // written atomically. Within a texel, samples are in the order the resampler processed the
 // photographs: grouped by view (camera, turntable angle) in order of first appearance, then by
@@ -49,6 +52,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -71,6 +75,15 @@ struct SampleStoreInfo {
   uint32_t images = 0;               // photographs resampled (BrdfSample::image indexes the
                                      // capture's full image list, not this count)
   std::string geometry;              // "mesh" or "normal_map"
+  // A linked store (`reflcap merge --link`): no chunk files of its own; chunk c is the join
+  // (JoinSampleChunks) of chunk c of each of these stores, in order — the parts of a sharded
+  // resample. Each with its SampleStoreFingerprint when linked, so a part that changed later is
+  // refused. Paths as written (absolute; a relative one is read against the store's folder).
+  struct Part {
+    std::string path;
+    std::string fingerprint;
+  };
+  std::vector<Part> parts;
 };
 
 class SampleStoreReader {
@@ -79,15 +92,40 @@ class SampleStoreReader {
   // missing; DataLoss (naming the file and field) when one is malformed or they disagree.
   static StatusOr<std::unique_ptr<SampleStoreReader>> Open(const std::filesystem::path& dir);
   const SampleStoreInfo& info() const { return info_; }
+  // SampleStoreFingerprint of the files as this reader read them.
+  const std::string& fingerprint() const { return fingerprint_; }
   // Reads and verifies chunk `index` (0 .. info().chunks - 1), including that it holds the texels
-  // store.json says it does. Thread-safe (no shared state).
+  // store.json says it does; of a linked store, reads the parts' chunks and joins them.
+  // Thread-safe (no shared state).
   StatusOr<TexelSampleChunk> ReadChunk(uint32_t index) const;
+  // The same into `chunk`, reusing its buffers' memory (of a store with chunk files).
+  Status ReadChunkInto(uint32_t index, TexelSampleChunk* chunk) const;
+  // The chunk's file (of a linked store: the first part's, for messages).
   std::filesystem::path ChunkPath(uint32_t index) const;
 
  private:
   std::filesystem::path dir_;
   SampleStoreInfo info_;
+  std::string fingerprint_;
+  std::vector<std::unique_ptr<SampleStoreReader>> parts_;  // a linked store's parts, in order
+  // Piece buffers of a linked store's reads, kept for the next read (sample_store.cc).
+  mutable std::unique_ptr<std::mutex> spare_mutex_ = std::make_unique<std::mutex>();
+  mutable std::vector<std::vector<TexelSampleChunk>> spare_pieces_;
+
+  // DataLoss naming `path` unless `chunk` holds the texels store.json puts in chunk `index`.
+  Status CheckPlacement(const std::filesystem::path& path, uint32_t index,
+                        const TexelSampleChunk& chunk) const;
 };
+
+// The chunk of the same texels holding, for each texel, the samples of `pieces[0]`, then those of
+// `pieces[1]`, ...: the chunk one resample writes from the photographs that its shards took in
+// order. InvalidArgument when the pieces are not of the same texels.
+StatusOr<TexelSampleChunk> JoinSampleChunks(const std::vector<TexelSampleChunk>& pieces);
+
+// Identity of a sample store: CRC-32 of store.json and of atlas.bin, as "xxxxxxxx-xxxxxxxx".
+// Fit parts and checkpoints of one store carry the same, as a linked store its parts'; the chunk
+// files are checked one by one as they are read.
+StatusOr<std::string> SampleStoreFingerprint(const std::filesystem::path& dir);
 
 constexpr char kSampleChunkMagic[8] = {'R', 'F', 'L', 'C', 'S', 'M', 'P', 'L'};
 constexpr uint32_t kSampleChunkVersion = 1;
@@ -106,13 +144,16 @@ Status WriteSampleChunk(const std::filesystem::path& path, const TexelSampleChun
 // path) when truncated, corrupted, or not a chunk (bad magic); FailedPrecondition for a version
 // this reader does not know.
 StatusOr<TexelSampleChunk> ReadSampleChunk(const std::filesystem::path& path);
-// Writes store.json and atlas.bin for `info` into `dir` (chunks are written separately), each
-// atomically. InvalidArgument when pixel_of_texel.size() != texels or chunks does not match
-// ceil(texels / chunk_texels).
+// The same into `chunk`, reusing the memory its vectors hold (contents undefined on error).
+Status ReadSampleChunkInto(const std::filesystem::path& path, TexelSampleChunk* chunk);
+// Writes store.json and atlas.bin for `info` into `dir` (chunks are written separately, or, with
+// info.parts, read from the parts), each atomically. InvalidArgument when pixel_of_texel.size() !=
+// texels or chunks does not match ceil(texels / chunk_texels).
 Status WriteSampleStoreInfo(const std::filesystem::path& dir, const SampleStoreInfo& info);
 
 // CRC-32 (IEEE 802.3 / zlib) of `size` bytes, continuing from `crc` (0 to start): equal to
-// zlib.crc32(data, crc). Slicing-by-8, about 2 GB/s.
+// zlib.crc32(data, crc). Carry-less multiplication (PCLMULQDQ) where the CPU has it, else zlib
+// (crc32.cc).
 uint32_t Crc32(const void* data, size_t size, uint32_t crc = 0);
 
 }  // namespace reflcap

@@ -269,6 +269,34 @@ TEST(ResampleCli, MergedShardsEqualOneRunAndForeignPartsAreRefused) {
     EXPECT_EQ(whole[key], joined[key]) << key;
   }
   EXPECT_EQ(joined["shards"]["count"], 3);
+  // A part writes no maps: the merge does, once.
+  EXPECT_FALSE(fs::exists(fs::path(p[0]) / "coverage.png"));
+  EXPECT_FALSE(fs::exists(fs::path(p[0]) / "domain.exr"));
+
+  // --link: the store names the parts instead of joining their chunks; its maps are the run's
+  // and a fit of it is the fit of the whole run, byte for byte.
+  const fs::path linked = dir / "linked";
+  r = RunCli("merge " + p[2] + " " + p[0] + " " + p[1] + " --out " + linked.string() + " --link", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(linked / "chunk_00000.rcs"));
+  for (const char* name : {"atlas.bin", "coverage.exr", "coverage.png", "domain.exr"}) {
+    EXPECT_EQ(ReadTextFile(dir / "whole" / name).value(), ReadTextFile(linked / name).value()) << name;
+  }
+  const nlohmann::json store = nlohmann::json::parse(ReadTextFile(linked / "store.json").value());
+  ASSERT_EQ(store["parts"].size(), 3u);
+  EXPECT_EQ(fs::path(store["parts"][0]["path"].get<std::string>()).filename(), "part0");  // shard order
+  for (const char* from : {"whole", "linked"}) {
+    r = RunCli(std::string("fit ") + (dir / from).string() + " --quiet --out " + (dir / (std::string("fit_") + from)).string(), dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  for (const char* name : {"params.exr", "sigma.exr", "status.exr"}) {
+    EXPECT_EQ(ReadTextFile(dir / "fit_whole" / name).value(), ReadTextFile(dir / "fit_linked" / name).value())
+        << name;
+  }
+  // Only resample parts link.
+  r = RunCli("merge " + (dir / "fit_whole").string() + " --out " + (dir / "nolink").string() + " --link", dir);
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "nolink"));
 
   // Parts that do not belong together: nothing is written.
   const std::string other = (dir / "other").string();

@@ -9,6 +9,8 @@
 #include <fstream>
 #include <random>
 
+#include <zlib.h>
+
 #include "engine/core/atomic_file.h"
 #include "tests/support/test_support.h"
 
@@ -74,6 +76,29 @@ TEST(Crc32, MatchesTheZlibCheckValue) {
   const std::string text = "The quick brown fox jumps over the lazy dog";
   EXPECT_EQ(Crc32(text.data(), text.size()), 0x414FA339u);
   EXPECT_EQ(Crc32(text.data() + 13, text.size() - 13, Crc32(text.data(), 13)), 0x414FA339u);
+  // An empty continuation keeps the CRC, also from a null buffer (an empty vector's data()):
+  // zlib alone answers that with 0, which made every chunk without samples "corrupt".
+  EXPECT_EQ(Crc32(nullptr, 0, 0x414FA339u), 0x414FA339u);
+}
+
+TEST(Crc32, EqualsZlibForEveryLengthAlignmentAndContinuation) {
+  // The carry-less-multiplication path (>= 64 bytes, four lanes, then 16-byte blocks, then a
+  // tail) against zlib's table loop: every length up to 1,100 bytes (all lane/block/tail
+  // splits), odd alignments, continuations from arbitrary CRCs, and one large buffer.
+  std::mt19937 rng(7);
+  std::vector<uint8_t> bytes(3 << 20);
+  for (uint8_t& b : bytes) b = uint8_t(rng());
+  auto zlib = [](const uint8_t* p, size_t n, uint32_t crc) {
+    return n == 0 ? crc : uint32_t(crc32_z(crc, p, n));
+  };
+  for (size_t n = 0; n <= 1100; ++n) {
+    const size_t offset = n % 7;
+    const uint32_t from = uint32_t(rng());
+    ASSERT_EQ(Crc32(bytes.data() + offset, n, from), zlib(bytes.data() + offset, n, from)) << n;
+  }
+  EXPECT_EQ(Crc32(bytes.data() + 3, bytes.size() - 3), zlib(bytes.data() + 3, bytes.size() - 3, 0));
+  const uint32_t half = Crc32(bytes.data(), 1 << 20);
+  EXPECT_EQ(Crc32(bytes.data() + (1 << 20), 2 << 20, half), zlib(bytes.data(), 3 << 20, 0));
 }
 
 TEST(SampleChunk, RoundTripIsBitExact) {
@@ -263,6 +288,116 @@ TEST(SampleStore, WriteRejectsInconsistentInfo) {
   info = MakeInfo(10, 4);
   info.pixel_of_texel[3] = 40 * 30;  // outside the atlas
   EXPECT_EQ(WriteSampleStoreInfo(dir.path(), info).code(), StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace reflcap
+
+namespace reflcap {
+namespace {
+
+// Two part stores of the same 250 texels (as two shards of a resample write them) and a linked
+// store naming them: its chunks are the parts' chunks joined texel by texel, part 0 first.
+struct LinkedStores {
+  testing::ScratchDir dir;
+  SampleStoreInfo info = MakeInfo(250, 100);
+  std::vector<std::vector<TexelSampleChunk>> parts;
+  fs::path linked = dir / "linked";
+
+  LinkedStores() {
+    fs::create_directories(linked);
+    SampleStoreInfo link = info;
+    for (uint32_t p = 0; p < 2; ++p) {
+      const fs::path part = dir / ("part" + std::to_string(p));
+      fs::create_directories(part);
+      std::vector<TexelSampleChunk> chunks = {MakeChunk(0, 100, 1 + 3 * p),
+                                              MakeChunk(100, 100, 2 + 3 * p),
+                                              MakeChunk(200, 50, 3 + 3 * p)};
+      SampleStoreInfo part_info = info;
+      for (uint32_t c = 0; c < 3; ++c) {
+        part_info.samples += chunks[c].samples.size();
+        EXPECT_TRUE(WriteSampleChunk(part / SampleChunkFileName(c), chunks[c]).ok());
+      }
+      EXPECT_TRUE(WriteSampleStoreInfo(part, part_info).ok());
+      link.samples += part_info.samples;
+      link.parts.push_back({part.string(), SampleStoreFingerprint(part).value()});
+      parts.push_back(std::move(chunks));
+    }
+    EXPECT_TRUE(WriteSampleStoreInfo(linked, link).ok());
+  }
+};
+
+TEST(LinkedSampleStore, ReadsEachChunkAsThePartsJoinedInOrder) {
+  LinkedStores stores;
+  auto reader = SampleStoreReader::Open(stores.linked);
+  ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+  ASSERT_EQ((*reader)->info().parts.size(), 2u);
+  EXPECT_TRUE(fs::exists(stores.linked / "store.json"));
+  EXPECT_FALSE(fs::exists(stores.linked / SampleChunkFileName(0)));  // no chunk of its own
+  for (uint32_t c = 0; c < 3; ++c) {
+    auto chunk = (*reader)->ReadChunk(c);
+    ASSERT_TRUE(chunk.ok()) << chunk.status().ToString();
+    const TexelSampleChunk& a = stores.parts[0][c];
+    const TexelSampleChunk& b = stores.parts[1][c];
+    ASSERT_EQ(chunk->texel_count, a.texel_count);
+    for (uint32_t t = 0; t < a.texel_count; ++t) {
+      // Texel t: part 0's samples, then part 1's.
+      ASSERT_EQ(chunk->SampleCount(t), a.SampleCount(t) + b.SampleCount(t)) << "texel " << t;
+      for (uint64_t k = 0; k < chunk->SampleCount(t); ++k) {
+        const BrdfSample& want = k < a.SampleCount(t) ? a.SamplesOf(t)[k]
+                                                      : b.SamplesOf(t)[k - a.SampleCount(t)];
+        EXPECT_EQ(std::memcmp(&chunk->SamplesOf(t)[k], &want, sizeof want), 0);
+      }
+    }
+  }
+}
+
+TEST(LinkedSampleStore, RefusesAPartThatChangedOrWentMissingNamingIt) {
+  {
+    LinkedStores stores;
+    // Part 1 rewritten after the link (another resample's store in its place).
+    SampleStoreInfo changed = stores.info;
+    changed.split = "holdout";
+    for (const auto& c : stores.parts[1]) changed.samples += c.samples.size();
+    ASSERT_TRUE(WriteSampleStoreInfo(stores.dir / "part1", changed).ok());
+    const Status status = SampleStoreReader::Open(stores.linked).status();
+    EXPECT_EQ(status.code(), StatusCode::kFailedPrecondition) << status.ToString();
+    EXPECT_NE(status.message().find("parts[1]"), std::string::npos) << status.message();
+    EXPECT_NE(status.message().find("changed since it was linked"), std::string::npos);
+  }
+  {
+    LinkedStores stores;
+    fs::remove_all(stores.dir / "part0");
+    const Status status = SampleStoreReader::Open(stores.linked).status();
+    EXPECT_EQ(status.code(), StatusCode::kNotFound) << status.ToString();
+    EXPECT_EQ(status.message().rfind((stores.linked / "store.json").string(), 0), 0u)
+        << status.message();
+    EXPECT_NE(status.message().find((stores.dir / "part0").string()), std::string::npos);
+  }
+  {
+    LinkedStores stores;
+    // A damaged chunk of a part is reported by the part's file name when it is read.
+    const fs::path chunk = stores.dir / "part1" / SampleChunkFileName(1);
+    std::string bytes = ReadBytes(chunk);
+    bytes[bytes.size() - 3] ^= 0x10;
+    WriteBytes(chunk, bytes);
+    auto reader = SampleStoreReader::Open(stores.linked);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    ExpectError((*reader)->ReadChunk(1).status(), StatusCode::kDataLoss, chunk, "checksum");
+  }
+}
+
+TEST(LinkedSampleStore, SampleCountMustBeThePartsSum) {
+  LinkedStores stores;
+  auto text = ReadTextFile(stores.linked / "store.json").value();
+  const std::string key = "\"samples\": ";
+  const size_t at = text.find(key);
+  ASSERT_NE(at, std::string::npos);
+  const size_t end = text.find_first_of(",\n", at + key.size());
+  text.replace(at + key.size(), end - at - key.size(), "7");
+  testing::WriteText(stores.linked / "store.json", text);
+  ExpectError(SampleStoreReader::Open(stores.linked).status(), StatusCode::kDataLoss,
+              stores.linked / "store.json", "parts hold");
 }
 
 }  // namespace
