@@ -362,6 +362,11 @@ StatusOr<std::vector<uint32_t>> ReadAtlasBin(const fs::path& path, const SampleS
 }  // namespace
 
 StatusOr<std::unique_ptr<SampleStoreReader>> SampleStoreReader::Open(const fs::path& dir) {
+  return OpenStore(dir, /*as_part=*/false);
+}
+
+StatusOr<std::unique_ptr<SampleStoreReader>> SampleStoreReader::OpenStore(const fs::path& dir,
+                                                                          bool as_part) {
   const fs::path json_path = dir / "store.json";
   const std::string file = json_path.string();
   auto text = ReadTextFile(json_path);
@@ -405,6 +410,10 @@ StatusOr<std::unique_ptr<SampleStoreReader>> SampleStoreReader::Open(const fs::p
   uint32_t atlas_crc = 0;
   REFLCAP_ASSIGN_OR_RETURN(info.pixel_of_texel, ReadAtlasBin(dir / "atlas.bin", info, &atlas_crc));
   reader->fingerprint_ = FingerprintOf(Crc32(text->data(), text->size()), atlas_crc);
+  if (root.contains("parts") && as_part) {
+    // Checked before its parts are opened: a part naming its own folder must not recurse.
+    return DataLossError(file, ": is itself a linked store (a part must hold its chunks)");
+  }
   if (root.contains("parts")) {
     const Json& parts = root["parts"];
     if (!parts.is_array() || parts.empty()) {
@@ -419,16 +428,13 @@ StatusOr<std::unique_ptr<SampleStoreReader>> SampleStoreReader::Open(const fs::p
       REFLCAP_RETURN_IF_ERROR(JsonField(parts[i], "fingerprint", where, &part.fingerprint));
       fs::path part_dir(part.path);
       if (part_dir.is_relative()) part_dir = dir / part_dir;
-      auto opened = Open(part_dir);
+      auto opened = OpenStore(part_dir, /*as_part=*/true);
       if (!opened.ok()) {
         return Status(opened.status().code(),
                       StrCat(where, ": ", part.path, ": ", opened.status().message()));
       }
       std::unique_ptr<SampleStoreReader> reader_of_part = std::move(*opened);
       const SampleStoreInfo& p = reader_of_part->info();
-      if (!p.parts.empty()) {
-        return DataLossError(where, ": ", part.path, " is itself a linked store");
-      }
       // The part must be the store that was linked: its identity, then its layout.
       const std::string& fingerprint = reader_of_part->fingerprint();
       if (fingerprint != part.fingerprint) {

@@ -104,6 +104,10 @@ class SampleStoreReader {
   std::filesystem::path ChunkPath(uint32_t index) const;
 
  private:
+  // Open; a store opened as a linked store's part (`as_part`) must not be linked itself.
+  static StatusOr<std::unique_ptr<SampleStoreReader>> OpenStore(const std::filesystem::path& dir,
+                                                                bool as_part);
+
   std::filesystem::path dir_;
   SampleStoreInfo info_;
   std::string fingerprint_;

@@ -661,6 +661,20 @@ TEST(BadInputCorpus, MergeAndExport) {
          return "merge " + Q(TinyResamplePart(0)) + " " + Q(part) + " --out " + Q(w / "out");
        },
        kBadInput, {"part1/chunk_00000.rcs", "truncated"}},
+      {"merge --link: parts that are not resample parts",
+       [](const fs::path& w) { return "merge " + Q(TinyFit()) + " --out " + Q(w / "out") + " --link"; },
+       kUsage, {"--link", "resample parts"}},
+      {"fit: a linked store whose part has gone",
+       [](const fs::path& w) {
+         const fs::path p0 = CopyTo(TinyResamplePart(0), w, "p0");
+         const fs::path p1 = CopyTo(TinyResamplePart(1), w, "p1");
+         ScratchDir logs;
+         const CliResult r = RunCli("merge " + Q(p0) + " " + Q(p1) + " --link --out " + Q(w / "linked"), logs);
+         REFLCAP_CHECK(r.exit_code == 0) << r.err;
+         fs::remove_all(p1);
+         return "fit " + Q(w / "linked") + " --out " + Q(w / "out");
+       },
+       kBadInput, {"linked/store.json", "parts[1]", "p1"}},
       {"fit: --shard 2/2", [](const fs::path& w) {
          return "fit " + Q(TinySamples()) + " --out " + Q(w / "out") + " --shard 2/2"; },
        kUsage, {"--shard"}},

@@ -387,6 +387,21 @@ TEST(LinkedSampleStore, RefusesAPartThatChangedOrWentMissingNamingIt) {
   }
 }
 
+TEST(LinkedSampleStore, APartThatIsItselfLinkedIsRefusedWithoutRecursion) {
+  LinkedStores stores;
+  // A part naming the linked store's own folder (relative "."), as a hand-edited or hostile
+  // store.json might: refused when the part is opened, not followed round and round.
+  auto text = ReadTextFile(stores.linked / "store.json").value();
+  const std::string part0 = (stores.dir / "part0").string();
+  const size_t at = text.find(part0);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, part0.size(), ".");
+  testing::WriteText(stores.linked / "store.json", text);
+  const Status status = SampleStoreReader::Open(stores.linked).status();
+  EXPECT_EQ(status.code(), StatusCode::kDataLoss) << status.ToString();
+  EXPECT_NE(status.message().find("itself a linked store"), std::string::npos) << status.message();
+}
+
 TEST(LinkedSampleStore, SampleCountMustBeThePartsSum) {
   LinkedStores stores;
   auto text = ReadTextFile(stores.linked / "store.json").value();
