@@ -673,9 +673,8 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   CheckpointCleanup cleanup(checkpoint, ".rcf");
 
   // Texels no chunk holds keep the store's initial state: zero parameters, too few samples,
-  // unknown sigmas.
-  // A shard keeps no per-texel state (82 bytes a texel for the whole atlas, and the sigma spill):
-  // its part is the chunk result files.
+  // unknown sigmas. A shard keeps no per-texel state (82 bytes a texel for the whole atlas, and
+  // the sigma spill): its part is the chunk result files.
   FitPass pass;
   if (!sharded) {
     pass.fits = std::make_unique<FitStore>(info.texels, options.lobes);

@@ -136,6 +136,12 @@ def main():
           store_input(store_json(5, 3, 5, 4, 2), atlas, chunk(0, [2, 0, 3])))
     write("sample_store", "one_chunk.bin",
           store_input(store_json(5, 8, 5, 4, 2), atlas, chunk(0, [1, 1, 1, 1, 1])))
+    # A linked store of two parts (merge --link): the fuzzer writes the part folder and the
+    # fingerprints; "samples" 0 so that the linked store's count equals its parts' sum.
+    linked = store_json(5, 8, 0, 4, 2)[:-1] + (
+        b',"parts":[{"path":"part","fingerprint":""},{"path":"part","fingerprint":""}]}')
+    write("sample_store", "linked_two_parts.bin",
+          store_input(linked, atlas, chunk(0, [1, 0, 2, 1, 1])))
 
 
 if __name__ == "__main__":
