@@ -3,7 +3,11 @@
 
 #include <algorithm>
 #include <bitset>
+#include <cstdio>
 #include <cstring>
+#include <memory>
+#include <type_traits>
+#include <utility>
 #include <cmath>
 #include <limits>
 
@@ -113,63 +117,74 @@ namespace {
 // coverage file: magic, texel count, payload CRC-32, then the arrays in declaration order.
 constexpr char kCoverageMagic[8] = {'R', 'F', 'L', 'C', 'C', 'O', 'V', '1'};
 
-template <typename T>
-void Append(std::string* out, const std::vector<T>& v) {
-  out->append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
-}
-template <typename T>
-bool Take(const std::string& in, size_t* at, std::vector<T>* v) {
-  const size_t bytes = v->size() * sizeof(T);
-  if (in.size() - *at < bytes) return false;
-  std::memcpy(v->data(), in.data() + *at, bytes);
-  *at += bytes;
-  return true;
-}
-
 }  // namespace
 
+// The arrays in file order, as byte ranges (Save and Load stream them without a staging copy:
+// a part's 35 MB coverage.bin at 10^6 texels took 0.12 s when concatenated into one string).
+template <typename Self>
+auto TexelCoverage::Pieces(Self& c) {
+  auto piece = [](auto& v) {
+    using Byte = std::conditional_t<std::is_const_v<std::remove_reference_t<decltype(v)>>,
+                                    const char, char>;
+    return std::pair<Byte*, size_t>(reinterpret_cast<Byte*>(v.data()),
+                                    v.size() * sizeof(v[0]));
+  };
+  return std::array{piece(c.samples_), piece(c.views_), piece(c.last_view_), piece(c.seen_),
+                    piece(c.observations_), piece(c.cells_), piece(c.min_half_deg_)};
+}
+
 Status TexelCoverage::Save(const std::filesystem::path& path) const {
-  std::string payload;
-  Append(&payload, samples_);
-  Append(&payload, views_);
-  Append(&payload, last_view_);
-  Append(&payload, seen_);
-  Append(&payload, observations_);
-  Append(&payload, cells_);
-  Append(&payload, min_half_deg_);
-  std::string file(kCoverageMagic, 8);
+  const auto pieces = Pieces(*this);
+  uint32_t crc = 0;
+  for (const auto& [data, bytes] : pieces) crc = Crc32(data, bytes, crc);
   const uint64_t texels = samples_.size();
-  const uint32_t crc = Crc32(payload.data(), payload.size());
-  file.append(reinterpret_cast<const char*>(&texels), sizeof texels);
-  file.append(reinterpret_cast<const char*>(&crc), sizeof crc);
-  file += payload;
-  return WriteTextFileAtomic(path, file);
+  return WriteFileAtomic(path, [&](const std::filesystem::path& tmp) -> Status {
+    std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(tmp.c_str(), "wb"), &std::fclose);
+    if (!f) return InternalError(path.string(), ": cannot create file");
+    bool ok = std::fwrite(kCoverageMagic, 1, 8, f.get()) == 8 &&
+              std::fwrite(&texels, sizeof texels, 1, f.get()) == 1 &&
+              std::fwrite(&crc, sizeof crc, 1, f.get()) == 1;
+    for (const auto& [data, bytes] : pieces) {
+      ok = ok && std::fwrite(data, 1, bytes, f.get()) == bytes;
+    }
+    ok = std::fclose(f.release()) == 0 && ok;
+    if (!ok) return InternalError(path.string(), ": write failed");
+    return OkStatus();
+  });
 }
 
 StatusOr<TexelCoverage> TexelCoverage::Load(const std::filesystem::path& path, size_t texels) {
-  REFLCAP_ASSIGN_OR_RETURN(std::string file, ReadTextFile(path));
   const std::string name = path.string();
-  constexpr size_t kHeader = 8 + sizeof(uint64_t) + sizeof(uint32_t);
-  if (file.size() < kHeader || file.compare(0, 8, kCoverageMagic, 8) != 0) {
-    return DataLossError(name, ": not a reflcap coverage file (bad magic or truncated)");
-  }
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (!f) return NotFoundError(name, ": cannot open file");
+  char magic[8];
   uint64_t count = 0;
   uint32_t crc = 0;
-  std::memcpy(&count, file.data() + 8, sizeof count);
-  std::memcpy(&crc, file.data() + 16, sizeof crc);
+  if (std::fread(magic, 1, 8, f.get()) != 8 || std::memcmp(magic, kCoverageMagic, 8) != 0) {
+    return DataLossError(name, ": not a reflcap coverage file (bad magic or truncated)");
+  }
+  if (std::fread(&count, sizeof count, 1, f.get()) != 1 ||
+      std::fread(&crc, sizeof crc, 1, f.get()) != 1) {
+    return DataLossError(name, ": not a reflcap coverage file (bad magic or truncated)");
+  }
   if (count != texels) {
     return DataLossError(name, ": texels: holds ", count, " texels, expected ", texels);
   }
-  if (Crc32(file.data() + kHeader, file.size() - kHeader) != crc) {
+  TexelCoverage c(texels);
+  uint32_t actual = 0;
+  bool whole = true;
+  for (const auto& [data, bytes] : Pieces(c)) {
+    whole = whole && std::fread(data, 1, bytes, f.get()) == bytes;
+    if (whole) actual = Crc32(data, bytes, actual);
+  }
+  char extra;
+  if (!whole || std::fread(&extra, 1, 1, f.get()) != 0) {
+    return DataLossError(name, ": coverage file has the wrong size");
+  }
+  if (std::ferror(f.get())) return DataLossError(name, ": read failed");
+  if (actual != crc) {
     return DataLossError(name, ": corrupt coverage file (checksum mismatch or truncated)");
   }
-  TexelCoverage c(texels);
-  size_t at = kHeader;
-  const bool ok = Take(file, &at, &c.samples_) && Take(file, &at, &c.views_) &&
-                  Take(file, &at, &c.last_view_) && Take(file, &at, &c.seen_) &&
-                  Take(file, &at, &c.observations_) && Take(file, &at, &c.cells_) &&
-                  Take(file, &at, &c.min_half_deg_);
-  if (!ok || at != file.size()) return DataLossError(name, ": coverage file has the wrong size");
   return c;
 }
 

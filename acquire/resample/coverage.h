@@ -66,6 +66,10 @@ class TexelCoverage {
   static StatusOr<TexelCoverage> Load(const std::filesystem::path& path, size_t texels);
 
  private:
+  // The arrays in file order as (bytes, size) pairs: Save and Load stream them.
+  template <typename Self>
+  static auto Pieces(Self& c);
+
   std::vector<uint32_t> samples_;
   std::vector<uint16_t> views_;
   std::vector<int32_t> last_view_;

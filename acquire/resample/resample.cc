@@ -264,6 +264,51 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     if (image.saturation == 0) image.saturation = noise.saturation;
   }
 
+  // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
+  ImageOrder ordered = OrderImages(capture, options.split);
+  std::vector<std::pair<int, uint32_t>>& order = ordered.order;  // (view, image index)
+  const size_t skipped = ordered.skipped;
+  if (skipped > 0) {
+    REFLCAP_LOG(kWarning) << skipped << " selected images are not from the normal map's camera "
+                          << "and were skipped";
+  }
+  if (order.empty()) {
+    return FailedPreconditionError(file, ": images: no image in split \"",
+                                   SplitSelectionName(options.split), "\"",
+                                   skipped ? " from the normal map's camera" : "");
+  }
+  // A shard keeps the photographs of its views (contiguous in `order`, which is grouped by view).
+  const std::vector<std::pair<int, uint32_t>> all_order = order;
+  const uint32_t views_total = ordered.views;
+  const bool sharded = options.shard.count > 1;
+  ItemRange view_range{0, views_total};
+  if (sharded) {
+    REFLCAP_ASSIGN_OR_RETURN(view_range,
+                             ShardRange(options.shard, views_total, "views (camera x turntable poses)"));
+    order.clear();
+    for (const auto& o : all_order) {
+      if (uint32_t(o.first) >= view_range.begin && uint32_t(o.first) < view_range.end) order.push_back(o);
+    }
+  }
+  // A photograph and, when it has one and it is used, its variance image (read together).
+  struct Photograph {
+    StatusOr<Image> pixels = Image();
+    std::optional<StatusOr<Image>> variance;
+  };
+  const bool use_variance = options.use_variance;
+  auto read_image = [&capture, use_variance](uint32_t index) {
+    return std::async(std::launch::async, [&capture, use_variance, index] {
+      Photograph photo;
+      photo.pixels = ReadImageRgb(capture.Resolve(capture.images[index].file));
+      if (photo.pixels.ok() && use_variance && !capture.images[index].variance.empty()) {
+        photo.variance = ReadVarianceImage(capture, index);
+      }
+      return photo;
+    });
+  };
+  // The first photograph is read while the geometry is built (each shard pays that setup).
+  std::future<Photograph> next = read_image(order.front().second);
+
   // ---- Geometry -------------------------------------------------------------------------------
   TexelAtlas atlas;
   TriangleMesh loaded_mesh;              // when the caller gave none
@@ -358,32 +403,6 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   double cross_check_s = 0;
   VulkanMaskStats mask_stats;
 
-  // ---- Images, grouped by view (camera, turntable angle) --------------------------------------
-  ImageOrder ordered = OrderImages(capture, options.split);
-  std::vector<std::pair<int, uint32_t>>& order = ordered.order;  // (view, image index)
-  const size_t skipped = ordered.skipped;
-  if (skipped > 0) {
-    REFLCAP_LOG(kWarning) << skipped << " selected images are not from the normal map's camera "
-                          << "and were skipped";
-  }
-  if (order.empty()) {
-    return FailedPreconditionError(file, ": images: no image in split \"",
-                                   SplitSelectionName(options.split), "\"",
-                                   skipped ? " from the normal map's camera" : "");
-  }
-  // A shard keeps the photographs of its views (contiguous in `order`, which is grouped by view).
-  const std::vector<std::pair<int, uint32_t>> all_order = order;
-  const uint32_t views_total = ordered.views;
-  const bool sharded = options.shard.count > 1;
-  ItemRange view_range{0, views_total};
-  if (sharded) {
-    REFLCAP_ASSIGN_OR_RETURN(view_range,
-                             ShardRange(options.shard, views_total, "views (camera x turntable poses)"));
-    order.clear();
-    for (const auto& o : all_order) {
-      if (uint32_t(o.first) >= view_range.begin && uint32_t(o.first) < view_range.end) order.push_back(o);
-    }
-  }
   const double setup_s = Seconds(start);
 
   // ---- Checkpoint: start one, or continue from one ----------------------------------------------
@@ -520,25 +539,12 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   double& read_wait_s = tally.read_wait_s;
   double& resample_s = tally.resample_s;
   double& stream_s = tally.stream_s;
-  // A photograph and, when it has one and it is used, its variance image (read together).
-  struct Photograph {
-    StatusOr<Image> pixels = Image();
-    std::optional<StatusOr<Image>> variance;
-  };
-  const bool use_variance = options.use_variance;
-  auto read_image = [&capture, use_variance](uint32_t index) {
-    return std::async(std::launch::async, [&capture, use_variance, index] {
-      Photograph photo;
-      photo.pixels = ReadImageRgb(capture.Resolve(capture.images[index].file));
-      if (photo.pixels.ok() && use_variance && !capture.images[index].variance.empty()) {
-        photo.variance = ReadVarianceImage(capture, index);
-      }
-      return photo;
-    });
-  };
   Progress progress("resample", int64_t(order.size()));
-  if (first_image > 0) progress.Advance(int64_t(first_image));
-  std::future<Photograph> next = read_image(order[first_image].second);
+  if (first_image > 0) {
+    progress.Advance(int64_t(first_image));
+    next.wait();  // the prefetched first photograph is not needed: read where the run resumes
+    next = read_image(order[first_image].second);
+  }
   ImageOutput output, embree_output;
   CameraMapView camera_map;
   for (size_t k = first_image; k < order.size(); ++k) {

@@ -79,6 +79,8 @@ struct SampleStoreInfo {
   // (JoinSampleChunks) of chunk c of each of these stores, in order — the parts of a sharded
   // resample. Each with its SampleStoreFingerprint when linked, so a part that changed later is
   // refused. Paths as written (absolute; a relative one is read against the store's folder).
+  // A part's atlas.bin is checked by its header only (its layout, header CRC and the payload CRC
+  // it records, which must be the linked store's): the linked store's own atlas is the one used.
   struct Part {
     std::string path;
     std::string fingerprint;
@@ -111,6 +113,7 @@ class SampleStoreReader {
   std::filesystem::path dir_;
   SampleStoreInfo info_;
   std::string fingerprint_;
+  uint32_t atlas_payload_crc_ = 0;  // atlas.bin's recorded payload CRC
   std::vector<std::unique_ptr<SampleStoreReader>> parts_;  // a linked store's parts, in order
   // Piece buffers of a linked store's reads, kept for the next read (sample_store.cc).
   mutable std::unique_ptr<std::mutex> spare_mutex_ = std::make_unique<std::mutex>();

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <fstream>
@@ -417,6 +418,57 @@ TEST(LinkedSampleStore, RefusesAPartThatChangedOrWentMissingNamingIt) {
     auto reader = SampleStoreReader::Open(stores.linked);
     ASSERT_TRUE(reader.ok()) << reader.status().ToString();
     ExpectError((*reader)->ReadChunk(1).status(), StatusCode::kDataLoss, chunk, "checksum");
+  }
+}
+
+TEST(LinkedSampleStore, APartsAtlasIsCheckedByItsHeader) {
+  // The fingerprint read from a part's atlas header equals the one the link recorded (which
+  // SampleStoreFingerprint computes from every byte); the linked store's own atlas is the one
+  // used, so a part's atlas is checked by its header only.
+  {
+    LinkedStores stores;
+    // Another atlas in part 1 (pixels reversed; store.json unchanged): another payload CRC in
+    // the header, so another fingerprint.
+    SampleStoreInfo other = stores.info;
+    for (const auto& c : stores.parts[1]) other.samples += c.samples.size();
+    std::reverse(other.pixel_of_texel.begin(), other.pixel_of_texel.end());
+    const fs::path scratch = stores.dir / "scratch";
+    fs::create_directories(scratch);
+    ASSERT_TRUE(WriteSampleStoreInfo(scratch, other).ok());
+    fs::copy_file(scratch / "atlas.bin", stores.dir / "part1" / "atlas.bin",
+                  fs::copy_options::overwrite_existing);
+    const Status status = SampleStoreReader::Open(stores.linked).status();
+    EXPECT_EQ(status.code(), StatusCode::kFailedPrecondition) << status.ToString();
+    EXPECT_NE(status.message().find("parts[1]"), std::string::npos) << status.message();
+    EXPECT_NE(status.message().find("changed since it was linked"), std::string::npos);
+  }
+  {
+    LinkedStores stores;
+    // A damaged header is reported by the part's atlas file.
+    const fs::path atlas = stores.dir / "part0" / "atlas.bin";
+    std::string bytes = ReadBytes(atlas);
+    bytes[12] ^= 0x01;  // width
+    WriteBytes(atlas, bytes);
+    const Status status = SampleStoreReader::Open(stores.linked).status();
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << status.ToString();
+    EXPECT_NE(status.message().find(atlas.string()), std::string::npos) << status.message();
+    EXPECT_NE(status.message().find("header checksum"), std::string::npos) << status.message();
+  }
+  {
+    LinkedStores stores;
+    // A damaged payload byte of a part's atlas: never read, so the store opens and reads as
+    // before (the linked store's own atlas is intact and is what readers use).
+    const fs::path atlas = stores.dir / "part0" / "atlas.bin";
+    std::string bytes = ReadBytes(atlas);
+    bytes[bytes.size() - 2] ^= 0x40;
+    WriteBytes(atlas, bytes);
+    auto reader = SampleStoreReader::Open(stores.linked);
+    ASSERT_TRUE(reader.ok()) << reader.status().ToString();
+    EXPECT_EQ((*reader)->info().pixel_of_texel, stores.info.pixel_of_texel);
+    EXPECT_TRUE((*reader)->ReadChunk(2).ok());
+    // Opened on its own, the part is checked whole.
+    ExpectError(SampleStoreReader::Open(stores.dir / "part0").status(), StatusCode::kDataLoss,
+                atlas, "payload checksum");
   }
 }
 
