@@ -573,6 +573,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
        {{"clusters", cluster_stats.clusters},
         {"clusters_with_lobe", cluster_stats.clusters_with_lobe},
         {"refined", cluster_stats.refined},
+        {"borrowing", cluster_stats.borrowing},
         {"clustered_texels", cluster_stats.clustered_texels},
         {"recipients", cluster_stats.recipients},
         {"no_lobe", cluster_stats.no_lobe},

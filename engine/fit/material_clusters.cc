@@ -133,7 +133,7 @@ bool MaterialClusters::PoolIn(uint64_t first, uint64_t end) const {
 
 bool MaterialClusters::KeptIn(uint64_t first, uint64_t end) const {
   for (uint64_t t = first; t < end && t < cluster_of.size(); ++t) {
-    if (cluster_of[t] >= 0 && !kept[size_t(cluster_of[t])].empty()) return true;
+    if (cluster_of[t] >= 0 && lend_from[size_t(cluster_of[t])] >= 0) return true;
   }
   return false;
 }
@@ -194,6 +194,8 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
   out.brightest.assign(k_count, {});
   out.kept.resize(k_count);
   out.centroid.assign(k_count, {0, 0, 0});
+  out.absent.assign(k_count, 0);
+  out.lend_from.assign(k_count, -1);
   for (size_t k = 0; k < k_count; ++k) {
     Feature mean = Feature::Zero();
     for (uint32_t i : nodes[k].items) mean += f[i];
@@ -207,6 +209,7 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
       out.cluster_of[t] = int32_t(k);
       if (HasOwnLobe(fits, t)) own.push_back(t);
       if (HasOwnLobe(fits, t) || LobeAbsent(fits, t)) evidenced.push_back(t);
+      out.absent[k] += LobeAbsent(fits, t);
     }
     stats->clustered_texels += nodes[k].items.size();
     // Candidates: the best-sampled own lobes (ties: lower texel first).
@@ -490,6 +493,33 @@ void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
     stats->clusters_with_lobe += kept_any[size_t(k)];
     stats->refined += refined_kept[size_t(k)];
   }
+  // Lenders. A cluster with evidence (lobes of its own members, or lobes measured absent) lends
+  // what it kept, possibly nothing. One without any takes the verdict of the nearest cluster by
+  // centroid that has evidence: its kept lobes, or nothing when that material is matte.
+  const auto has_evidence = [&](size_t k) {
+    return !clusters->candidate_params[k].empty() || clusters->absent[k] > 0;
+  };
+  for (size_t k = 0; k < size_t(clusters->count); ++k) {
+    int32_t& from = clusters->lend_from[k];
+    from = kept_any[k] ? int32_t(k) : -1;
+    if (has_evidence(k)) continue;
+    double best_d2 = std::numeric_limits<double>::infinity();
+    size_t nearest = k;
+    for (size_t j = 0; j < size_t(clusters->count); ++j) {
+      if (j == k || !has_evidence(j)) continue;
+      double d2 = 0;
+      for (int i = 0; i < 3; ++i) {
+        const double d = clusters->centroid[k][size_t(i)] - clusters->centroid[j][size_t(i)];
+        d2 += d * d;
+      }
+      if (d2 < best_d2) {  // strictly: ties go to the lower id
+        best_d2 = d2;
+        nearest = j;
+      }
+    }
+    if (nearest != k && kept_any[nearest]) from = int32_t(nearest);
+    stats->borrowing += from >= 0;
+  }
   clusters->stash = {};
   clusters->usable = {};
   clusters->stash_offsets = {};
@@ -508,7 +538,10 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
     for (int64_t i = begin; i < end; ++i) {
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
-      const int32_t k = clusters.cluster_of[t];
+      // The cluster whose lobes it is offered (its own, or the lender of one without evidence).
+      const int32_t k = clusters.cluster_of[t] < 0
+                            ? -1
+                            : clusters.lend_from[size_t(clusters.cluster_of[t])];
       if (status == FitStatus::kNonFiniteInput || fits->donor(t) == FitStore::kClusterLobe) continue;
       const bool sparse = fits->samples(t) < kMinTransferSamples;
       if (sparse) {

@@ -45,6 +45,12 @@
 //          lobe), N its residuals — a texel's own lobe stays only where its samples pay for the
 //          parameters it spent on it. This is the cluster lobe as a prior: where the texel saw
 //          too little of its highlight to pin the lobe, the material's lobe predicts better.
+//      A cluster none of whose members had evidence either way (no lobe of its own, none measured
+//      absent: a fragment that the split cut from a material whose texels saw little, such as a
+//      dark metal whose chromaticity is noisy) has nothing to pool: it takes the verdict of the
+//      nearest cluster by centroid that has evidence — that cluster's kept lobes, offered under
+//      the same tests, or nothing when it is matte. Absence of evidence is not evidence of a matte
+//      material.
 //      A texel without samples (albedo filled, step 1b) takes the cluster's best lobe untested:
 //      nothing it saw can contradict it, and its material's highlight is the best prediction.
 //      A texel that takes a cluster lobe gets donor FitStore::kClusterLobe, its sigmas unknown
@@ -87,6 +93,7 @@ struct MaterialClusterStats {
   int clusters = 0;             // clusters formed
   int clusters_with_lobe = 0;   // clusters that kept at least one lobe
   int refined = 0;              // clusters whose kept lobes include the pooled LM fit
+  int borrowing = 0;            // clusters without evidence offered the nearest one's lobes
   size_t clustered_texels = 0;  // texels with a cluster
   size_t recipients = 0;        // Lambert-only texels that could take a lobe
   size_t no_lobe = 0;           // recipients without a cluster, or whose cluster kept no lobe
@@ -110,6 +117,11 @@ struct MaterialClusters {
   std::vector<std::array<double, brdf::kChannels>> brightest;  // over the pool's samples
   std::vector<std::vector<brdf::BrdfParams>> kept;  // step 3's lobes, best first
   std::vector<std::array<double, 3>> centroid;       // albedo-space mean of its texels (step 1)
+  std::vector<uint32_t> absent;                       // members whose lobe was measured absent
+  // Whose kept lobes its texels are offered (step 3): itself when it kept any; when none of its
+  // members had any evidence (no lobe of their own, none measured absent), the nearest cluster
+  // by centroid that has evidence, if that one kept lobes; else -1.
+  std::vector<int32_t> lend_from;
 
   std::vector<uint32_t> all_pool;  // every cluster's pool texels, ascending
 

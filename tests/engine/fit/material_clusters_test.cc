@@ -230,6 +230,61 @@ TEST(MaterialClusters, ATexelWhoseSamplesShowAnotherLobeKeepsItsOwn) {
   }
 }
 
+TEST(MaterialClusters, AClusterWithoutEvidenceTakesTheNearestEvidencedMaterialsVerdict) {
+  // Texels 0..39 glossy donors and 40..79 glossy texels that missed the highlight; 80..119 matte
+  // texels that saw their mirror configuration (lobe absent); 120..159 texels of a redder albedo
+  // and 160..199 texels of a greener one, none of which saw a highlight or measured its absence.
+  // Each group's albedo is exact, so five clusters form. The red one is nearest the glossy
+  // material and takes its lobe; the green one is nearest the matte material and takes nothing,
+  // though it is a lobe-bearing cluster's recipient by nothing but distance in albedo.
+  const brdf::BrdfParams glossy = Glossy();
+  brdf::BrdfParams red = glossy;
+  red.rho_d = {0.5f, 0.3f, 0.2f};
+  const std::array<float, 3> green_albedo = {0.28f, 0.5f, 0.52f};
+  const brdf::BrdfParams matte = Matte(kMatteAlbedo), green = Matte(green_albedo);
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 200; ++t) {
+    if (t < 40) {
+      fits.push_back(DonorFit(glossy));
+      samples.push_back(HighlightSamples(glossy, t));
+    } else if (t < 80) {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(Samples(glossy, false));
+    } else if (t < 120) {
+      fits.push_back(LobeAbsentFit(kMatteAlbedo));
+      samples.push_back(HighlightSamples(matte, t));
+    } else if (t < 160) {
+      fits.push_back(RecipientFit(red.rho_d));
+      samples.push_back(Samples(red, false));
+    } else {
+      fits.push_back(RecipientFit(green_albedo));
+      samples.push_back(Samples(green, false));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  MaterialClusters clusters;
+  const MaterialClusterStats stats = RunClusters(chunk, &store, 1, &clusters);
+  EXPECT_EQ(stats.clusters, 4);  // glossy (both groups), matte, red, green
+  const int32_t glossy_k = clusters.cluster_of[0], red_k = clusters.cluster_of[120],
+                green_k = clusters.cluster_of[160], matte_k = clusters.cluster_of[80];
+  ASSERT_NE(red_k, glossy_k);
+  ASSERT_NE(green_k, matte_k);
+  EXPECT_EQ(clusters.lend_from[size_t(glossy_k)], glossy_k);
+  EXPECT_EQ(clusters.lend_from[size_t(matte_k)], -1);
+  EXPECT_EQ(clusters.lend_from[size_t(red_k)], glossy_k);
+  EXPECT_EQ(clusters.lend_from[size_t(green_k)], -1);
+  EXPECT_EQ(stats.borrowing, 1);
+  for (size_t t = 120; t < 160; ++t) {
+    EXPECT_EQ(store.donor(t), FitStore::kClusterLobe) << t;
+    // The glossy material's lobe, the red texel's own albedo (re-fitted under it).
+    EXPECT_NEAR(store.Get(t).params.lobes[0][0].n, glossy.lobes[0][0].n, 1e-3 * glossy.lobes[0][0].n);
+    EXPECT_NEAR(store.Get(t).params.rho_d[0], red.rho_d[0], 1e-3) << t;
+  }
+  for (size_t t = 160; t < 200; ++t) EXPECT_TRUE(store.lambert_only(t)) << t;
+}
+
 TEST(MaterialClusters, SparseTexelsJoinTheNearestMaterialWithinReach) {
   // 40 glossy donors and 40 texels that missed the highlight form the material. Texel 80 has one
   // sample (no highlight) and the material's albedo; texel 81 no sample but a filled albedo of the
