@@ -45,6 +45,7 @@ StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std:
 // name: a usage error). Implemented in verb_fit.cc.
 struct FitFlags {
   std::string lobe_model = "aniso", init = "seed", loss = "none", vulkan_kernel = "auto";
+  std::string model_choice = "kfold";
   int cluster_size = 0;
   bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
   bool no_material_clusters = false;

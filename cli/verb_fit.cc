@@ -41,6 +41,12 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
                 "that the pooled samples of their material support");
   args->AddInt("max-material-clusters", &options->clusters.max_clusters,
                "material clusters: at most N (default 64)");
+  args->AddString("model-choice", &model_choice, "NAME",
+                  "material clusters: a texel with a lobe takes its cluster's instead when it "
+                  "predicts the texel's held-out photographs better (kfold, default) or when the "
+                  "information criterion prefers it (bic)");
+  args->AddInt("model-folds", &options->clusters.folds,
+               "--model-choice kfold: folds of the texel's photographs, 2..20 (default 5)");
   args->AddDouble("highlight-cone", &options->highlight_cone_deg,
                   "a lobe is fitted only where some sample lies within DEG of the mirror "
                   "direction (default 5)");
@@ -81,6 +87,7 @@ Status FitFlags::Apply(fit::FitOptions* options) {
   options->select_lobe_model = auto_model;
   options->lobe_transfer.enabled = !no_lobe_transfer;
   options->clusters.enabled = !no_material_clusters;
+  REFLCAP_ASSIGN_OR_RETURN(options->clusters.model_choice, fit::ParseModelChoice(model_choice));
   options->albedo_fill.enabled = !no_albedo_fill;
   options->channel_retry = !no_channel_retry;
   return OkStatus();

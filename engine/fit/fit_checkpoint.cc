@@ -224,7 +224,9 @@ Json FitOptionsToJson(const FitOptions& o) {
         {"max_clusters", o.clusters.max_clusters},
         {"min_cluster_texels", o.clusters.min_cluster_texels},
         {"pool_texels", o.clusters.pool_texels},
-        {"lobes_per_cluster", o.clusters.lobes_per_cluster}}},
+        {"lobes_per_cluster", o.clusters.lobes_per_cluster},
+        {"model_choice", ModelChoiceName(o.clusters.model_choice)},
+        {"folds", o.clusters.folds}}},
       {"albedo_fill",
        {{"enabled", o.albedo_fill.enabled},
         {"radius", o.albedo_fill.radius},
@@ -308,6 +310,13 @@ Status FitOptionsFromJson(const Json& json, const std::string& file, FitOptions*
   REFLCAP_RETURN_IF_ERROR(Field(c, "min_cluster_texels", file, wc, &o->clusters.min_cluster_texels));
   REFLCAP_RETURN_IF_ERROR(Field(c, "pool_texels", file, wc, &o->clusters.pool_texels));
   REFLCAP_RETURN_IF_ERROR(Field(c, "lobes_per_cluster", file, wc, &o->clusters.lobes_per_cluster));
+  // Absent in files written before the k-fold choice existed: those chose by the criterion.
+  std::string choice = "bic";
+  if (c.contains("model_choice")) REFLCAP_RETURN_IF_ERROR(Field(c, "model_choice", file, wc, &choice));
+  auto parsed_choice = ParseModelChoice(choice);
+  if (!parsed_choice.ok()) return DataLossError(file, ": ", wc, "model_choice: \"", choice, "\" is not kfold or bic");
+  o->clusters.model_choice = *parsed_choice;
+  if (c.contains("folds")) REFLCAP_RETURN_IF_ERROR(Field(c, "folds", file, wc, &o->clusters.folds));
   const Json& a = json["albedo_fill"];
   const std::string wa = "options.albedo_fill.";
   REFLCAP_RETURN_IF_ERROR(Field(a, "enabled", file, wa, &o->albedo_fill.enabled));

@@ -96,6 +96,13 @@ struct LobeTransferOptions {
 
 // Material clusters (engine/fit/material_clusters.h): after lobe transfer, the texels still
 // without a lobe take one their material's pooled samples support. Applied by RunFit.
+// Per-texel model choice between a texel's lobe and its material's (MaterialClusterOptions).
+enum class ModelChoice { kKFold, kBic };
+const char* ModelChoiceName(ModelChoice choice);  // "kfold", "bic"
+StatusOr<ModelChoice> ParseModelChoice(const std::string& name);
+// Most folds the k-fold comparison takes (per-fold sums on the stack).
+constexpr int kMaxModelFolds = 20;
+
 struct MaterialClusterOptions {
   bool enabled = true;
   // Albedo-space units (material_clusters.h step 1). Chromaticity 0.02: the synth's and
@@ -115,6 +122,11 @@ struct MaterialClusterOptions {
   // Lobes a cluster offers each recipient (best pooled cost first): a material whose lobe
   // varies (texture in the specular layer) is covered by a few.
   int lobes_per_cluster = 3;
+  // How a texel with a lobe (its own, or a neighbour's) is compared with its cluster's lobes
+  // (material_clusters.h step 4): by k-fold prediction of its own held-out photographs, or by
+  // the Bayesian information criterion on all its samples.
+  ModelChoice model_choice = ModelChoice::kKFold;
+  int folds = 5;  // k of the k-fold: 5 holds out a fifth of the photographs each time
 
   Status Validate() const;
 };

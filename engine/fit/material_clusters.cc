@@ -13,6 +13,7 @@
 #include "engine/core/check.h"
 #include "engine/core/parallel.h"
 #include "engine/fit/problem.h"
+#include "engine/fit/fitter.h"
 
 namespace reflcap::fit {
 
@@ -31,11 +32,24 @@ Status MaterialClusterOptions::Validate() const {
   if (pool_texels < 1 || pool_texels > 65536) {
     return InvalidArgumentError("material cluster pool ", pool_texels, " outside [1, 65536]");
   }
+  if (folds < 2 || folds > kMaxModelFolds) {
+    return InvalidArgumentError("model-choice folds ", folds, " outside [2, ", kMaxModelFolds, "]");
+  }
   if (lobes_per_cluster < 1 || lobes_per_cluster > kClusterLobeCandidates) {
     return InvalidArgumentError("lobes per material cluster ", lobes_per_cluster,
                                 " outside [1, ", kClusterLobeCandidates, "]");
   }
   return OkStatus();
+}
+
+const char* ModelChoiceName(ModelChoice choice) {
+  return choice == ModelChoice::kKFold ? "kfold" : "bic";
+}
+
+StatusOr<ModelChoice> ParseModelChoice(const std::string& name) {
+  if (name == "kfold") return ModelChoice::kKFold;
+  if (name == "bic") return ModelChoice::kBic;
+  return InvalidArgumentError("--model-choice: \"", name, "\" is not kfold or bic");
 }
 
 namespace {
@@ -525,6 +539,93 @@ void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
   clusters->stash_offsets = {};
 }
 
+namespace {
+
+// Step 4's k-fold comparison: a sample's fold is its photograph's index modulo the fold count,
+// so a fold holds whole photographs (a light and view seen together) as a held-out photograph
+// would be.
+int FoldOf(const BrdfSample& s, int folds) { return int(s.image % uint32_t(folds)); }
+
+// True when every fold holds a usable sample (and so every training set lacks one): with fewer
+// photographs than folds the comparison has nothing to hold out, and the criterion decides.
+bool EveryFoldHeld(const BrdfSample* samples, size_t count, const UsableSample* usable, int folds) {
+  std::array<bool, kMaxModelFolds> held{};
+  int distinct = 0;
+  for (size_t i = 0; i < count && distinct < folds; ++i) {
+    if (!usable[i].usable) continue;
+    bool& h = held[size_t(FoldOf(samples[i], folds))];
+    distinct += !h;
+    h = true;
+  }
+  return distinct == folds;
+}
+
+// A held-out cost lower by less than this (half of one residual's squared standard deviation)
+// is no evidence either way; costs are 1/2 sum w r^2 with w the inverse variance.
+constexpr double kKFoldMargin = 0.5;
+
+bool Residual(const BrdfSample& s, int c) {
+  const float w = s.weight[c], y = s.value[c];
+  return w > 0 && std::isfinite(w) && std::isfinite(y);
+}
+
+// The held-out cost of `params`' lobes (none when null) with the albedo re-fitted per fold on
+// the other folds: sum over folds of 1/2 sum w (y - rho_f / pi - lobe)^2 over the fold's samples.
+double CrossValidatedLobeCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
+                              const brdf::BrdfParams* params, int folds) {
+  double cost = 0;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    std::array<float, brdf::kMaxParamsPerChannel> channel{};
+    if (params) channel = params->Channel(c);
+    channel[0] = 0;  // the lobe part only
+    const int lobes = params ? params->num_lobes : 0;
+    std::array<double, kMaxModelFolds> s0{}, s1{}, s2{};
+    for (size_t i = 0; i < count; ++i) {
+      if (!usable[i].usable || !Residual(samples[i], c)) continue;
+      const double w = samples[i].weight[c];
+      const double e = samples[i].value[c] -
+                       (lobes ? brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes) : 0.0);
+      const int f = FoldOf(samples[i], folds);
+      s0[size_t(f)] += w;
+      s1[size_t(f)] += w * e;
+      s2[size_t(f)] += w * e * e;
+    }
+    double t0 = 0, t1 = 0;
+    for (int f = 0; f < folds; ++f) {
+      t0 += s0[size_t(f)];
+      t1 += s1[size_t(f)];
+    }
+    for (int f = 0; f < folds; ++f) {
+      const double train0 = t0 - s0[size_t(f)], train1 = t1 - s1[size_t(f)];
+      // No training residual (every sample of the channel in this fold): albedo 0.
+      const double d = train0 > 0 ? std::max(0.0, train1 / train0) : 0.0;
+      // Rounding can leave a tiny negative where the prediction is exact; a cost is never < 0.
+      cost += std::max(0.0, 0.5 * (s2[size_t(f)] - 2 * d * s1[size_t(f)] + d * d * s0[size_t(f)]));
+    }
+  }
+  return cost;
+}
+
+// The held-out cost of fits made without each fold: fold f's samples under fold_fit[f].
+double HeldOutFitCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
+                      const std::vector<const brdf::BrdfParams*>& fold_fit, int folds) {
+  double cost = 0;
+  for (size_t i = 0; i < count; ++i) {
+    if (!usable[i].usable) continue;
+    const brdf::BrdfParams& p = *fold_fit[size_t(FoldOf(samples[i], folds))];
+    for (int c = 0; c < brdf::kChannels; ++c) {
+      if (!Residual(samples[i], c)) continue;
+      const auto channel = p.Channel(c);
+      const double e = samples[i].value[c] -
+                       brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), p.num_lobes);
+      cost += 0.5 * samples[i].weight[c] * e * e;
+    }
+  }
+  return cost;
+}
+
+}  // namespace
+
 void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
                        const FitOptions& options, FitStore* fits, MaterialClusterStats* stats) {
   const double max_increase = options.lobe_transfer.max_cost_increase;
@@ -532,6 +633,60 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
                          ProblemsPerTexel(options.lobe_model);
   std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
   std::atomic<size_t> sparse_lent{0};
+  const int folds = options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0;
+  // k-fold: the texels with a lobe of their own that a cluster offers lobes to are fitted again
+  // without each fold (the CPU batched fitter, whatever backend made the fit: every backend then
+  // gets the same choice from the same fits).
+  std::vector<int32_t> refit_index(chunk.texel_count, -1);
+  std::vector<std::vector<TexelFit>> fold_fits(size_t(std::max(folds, 0)));
+  if (folds > 0) {
+    // Which texels need the refits (in parallel; gathered in texel order below).
+    std::vector<uint8_t> needs_refit(chunk.texel_count, 0);
+    ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
+      std::vector<UsableSample> usable;
+      for (int64_t ii = begin; ii < end; ++ii) {
+        const uint32_t i = uint32_t(ii);
+        const size_t t = size_t(chunk.first_texel) + i;
+        const int32_t k = clusters.cluster_of[t] < 0 ? -1 : clusters.lend_from[size_t(clusters.cluster_of[t])];
+        if (k < 0 || fits->status(t) == FitStatus::kNonFiniteInput || fits->lambert_only(t) ||
+            fits->donor(t) != FitStore::kNoDonor || fits->samples(t) < kMinTransferSamples) {
+          continue;
+        }
+        const BrdfSample* samples = chunk.SamplesOf(i);
+        usable.resize(chunk.SampleCount(i));
+        for (size_t s = 0; s < usable.size(); ++s) {
+          usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
+        }
+        if (!EveryFoldHeld(samples, usable.size(), usable.data(), folds)) continue;
+        needs_refit[i] = 1;
+      }
+    }, options.threads);
+    std::vector<uint32_t> refit;
+    for (uint32_t i = 0; i < chunk.texel_count; ++i) {
+      if (!needs_refit[i]) continue;
+      refit_index[i] = int32_t(refit.size());
+      refit.push_back(i);
+    }
+    if (!refit.empty()) {
+      auto fitter = CreateFitter(Backend::kCpu, options.threads);
+      REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
+      for (int f = 0; f < folds; ++f) {
+        TexelSampleChunk train;
+        train.first_texel = 0;
+        train.texel_count = uint32_t(refit.size());
+        train.offsets.push_back(0);
+        for (uint32_t i : refit) {
+          const BrdfSample* samples = chunk.SamplesOf(i);
+          for (size_t s = 0; s < chunk.SampleCount(i); ++s) {
+            if (FoldOf(samples[s], folds) != f) train.samples.push_back(samples[s]);
+          }
+          train.offsets.push_back(train.samples.size());
+        }
+        const Status fitted = (*fitter)->Fit(train, options, &fold_fits[size_t(f)]);
+        REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
+      }
+    }
+  }
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
     std::vector<UsableSample> usable;
@@ -581,6 +736,39 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       std::array<float, brdf::kChannels> rho{};
       const double own_cost =
           RefitAlbedoCost(samples, count, usable.data(), lambert_only ? nullptr : &fit.params, &rho);
+      if (folds > 0 && !lambert_only && EveryFoldHeld(samples, count, usable.data(), folds)) {
+        // A texel with a lobe: the cluster's lobe replaces it when it predicts the texel's
+        // held-out photographs better (k-fold), the texel's own lobe fitted without each fold.
+        double own_cv;
+        if (refit_index[size_t(i)] >= 0) {
+          std::vector<const brdf::BrdfParams*> per_fold(static_cast<size_t>(folds));
+          for (int f = 0; f < folds; ++f) {
+            per_fold[size_t(f)] = &fold_fits[size_t(f)][size_t(refit_index[size_t(i)])].params;
+          }
+          own_cv = HeldOutFitCost(samples, count, usable.data(), per_fold, folds);
+        } else {  // a neighbour's lobe: its shape was not fitted to these samples
+          own_cv = CrossValidatedLobeCost(samples, count, usable.data(), &fit.params, folds);
+        }
+        double best_cv = std::numeric_limits<double>::infinity();
+        const brdf::BrdfParams* best = nullptr;
+        for (const brdf::BrdfParams& lobe : clusters.kept[size_t(k)]) {
+          const double cv = CrossValidatedLobeCost(samples, count, usable.data(), &lobe, folds);
+          if (std::isfinite(cv) && cv < best_cv) {
+            best_cv = cv;
+            best = &lobe;
+          }
+        }
+        // Ties (both predictions exact to rounding) keep the texel's own measurement.
+        if (best == nullptr || !(best_cv < own_cv - kKFoldMargin)) continue;
+        const double cost = RefitAlbedoCost(samples, count, usable.data(), best, &rho);
+        fit.params.lobes = best->lobes;
+        fit.params.rho_d = rho;
+        fit.cost = float(cost);
+        fits->Set(t, fit);
+        fits->set_donor(t, FitStore::kClusterLobe);
+        ++replaced;
+        continue;
+      }
       // What the cluster lobe must beat: a Lambert-only texel's cost plus the allowed increase
       // (its samples do not contradict the lobe); a texel with a lobe, its BIC.
       const double k_own = fits->borrowed(t) ? 3.0 : double(own_params);

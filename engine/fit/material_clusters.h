@@ -39,12 +39,18 @@
 //        - a Lambert-only texel (kUnidentifiableLobe, kTooFewSamples, or lobe absent) takes the
 //          lowest-cost lobe that costs at most max_cost_increase more than its Lambert fit: its
 //          samples do not contradict it (lobe transfer's test);
-//        - a texel with a lobe (its own, or a neighbour's) takes the cluster lobe when the
-//          Bayesian information criterion prefers it: 2 cost + k ln N, k = 3 for the cluster lobe
-//          (the albedo only) and the texel's own parameter count for its fit (3 for a borrowed
-//          lobe), N its residuals — a texel's own lobe stays only where its samples pay for the
-//          parameters it spent on it. This is the cluster lobe as a prior: where the texel saw
-//          too little of its highlight to pin the lobe, the material's lobe predicts better.
+//        - a texel with a lobe (its own, or a neighbour's) takes the cluster lobe when it
+//          predicts the texel's held-out photographs better (ModelChoice::kKFold, the default):
+//          the samples fall into `folds` folds by photograph (image index mod folds); a
+//          candidate's score is the summed cost of each fold under the model fitted without it —
+//          the texel's own lobe refitted by the CPU batched fitter on the other folds, a borrowed
+//          or cluster lobe with the albedo re-fitted on them. The cluster's lobe wins when its
+//          score is lower by more than kKFoldMargin. Texels with some fold empty, and every
+//          texel under ModelChoice::kBic, use the Bayesian information criterion instead:
+//          2 cost + k ln N, k = 3 for the cluster lobe (the albedo only) and the texel's own
+//          parameter count for its fit (3 for a borrowed lobe), N its residuals. This is the
+//          cluster lobe as a prior: where the texel saw too little of its highlight to pin the
+//          lobe, the material's lobe predicts better.
 //      A cluster none of whose members had evidence either way (no lobe of its own, none measured
 //      absent: a fragment that the split cut from a material whose texels saw little, such as a
 //      dark metal whose chromaticity is noisy) has nothing to pool: it takes the verdict of the
