@@ -42,6 +42,11 @@ Status MaterialClusterOptions::Validate() const {
   return OkStatus();
 }
 
+int PhotographFold(uint32_t image, int folds) {
+  const uint32_t scattered = image * 2654435761u;  // 2^32 / golden ratio, odd: a bijection
+  return int((uint64_t(scattered) * uint64_t(folds)) >> 32);
+}
+
 const char* ModelChoiceName(ModelChoice choice) {
   return choice == ModelChoice::kKFold ? "kfold" : "bic";
 }
@@ -541,10 +546,12 @@ void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
 
 namespace {
 
-// Step 4's k-fold comparison: a sample's fold is its photograph's index modulo the fold count,
-// so a fold holds whole photographs (a light and view seen together) as a held-out photograph
-// would be.
-int FoldOf(const BrdfSample& s, int folds) { return int(s.image % uint32_t(folds)); }
+// Step 4's k-fold comparison: a fold holds whole photographs (a light and view seen together), as
+// a held-out photograph would be. The photograph index is scattered by Fibonacci hashing before
+// it is cut into `folds` ranges: with the index modulo the fold count, a capture whose held-out
+// photographs recur with the same period (every 8th held out, 8 folds) left a fold empty in every
+// texel, and the comparison fell back to the criterion everywhere.
+int FoldOf(const BrdfSample& s, int folds) { return PhotographFold(s.image, folds); }
 
 // True when every fold holds a usable sample (and so every training set lacks one): with fewer
 // photographs than folds the comparison has nothing to hold out, and the criterion decides.

@@ -41,7 +41,7 @@
 //          samples do not contradict it (lobe transfer's test);
 //        - a texel with a lobe (its own, or a neighbour's) takes the cluster lobe when it
 //          predicts the texel's held-out photographs better (ModelChoice::kKFold, the default):
-//          the samples fall into `folds` folds by photograph (image index mod folds); a
+//          the samples fall into `folds` folds by photograph (PhotographFold); a
 //          candidate's score is the summed cost of each fold under the model fitted without it —
 //          the texel's own lobe refitted by the CPU batched fitter on the other folds, a borrowed
 //          or cluster lobe with the albedo re-fitted on them. The cluster's lobe wins when its
@@ -136,6 +136,11 @@ struct MaterialClusters {
   // True when some texel in [first, end) belongs to a cluster that kept a lobe.
   bool KeptIn(uint64_t first, uint64_t end) const;
 };
+
+// Step 4's k-fold: the fold (0 .. folds - 1) of a photograph, by its index in the capture,
+// scattered (Fibonacci hashing) so that photographs held out or ordered with some period still
+// fill every fold.
+int PhotographFold(uint32_t image, int folds);
 
 // Step 1 (and the candidates of step 3). Empty (count 0) when options.enabled is false or the
 // fit has no lobes.

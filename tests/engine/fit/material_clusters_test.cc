@@ -336,6 +336,32 @@ TEST(MaterialClusters, SparseTexelsJoinTheNearestMaterialWithinReach) {
   EXPECT_TRUE(store.lambert_only(83));
 }
 
+TEST(MaterialClusters, PhotographFoldsStayFilledWhenTheSplitIsPeriodic) {
+  // The train photographs of a capture that holds out every k-th one (indices i % k != k - 1):
+  // every fold must get a share near 1/folds — with the index modulo the fold count, k = folds
+  // left one fold empty for every texel. Balanced within 25 % (200-odd photographs, 2..8 folds).
+  for (int folds = 2; folds <= 8; ++folds) {
+    for (int period = 2; period <= 10; ++period) {
+      std::vector<int> count(size_t(folds), 0);
+      int total = 0;
+      for (uint32_t image = 0; image < 240; ++image) {
+        if (int(image % uint32_t(period)) == period - 1) continue;
+        const int f = PhotographFold(image, folds);
+        ASSERT_GE(f, 0);
+        ASSERT_LT(f, folds);
+        ++count[size_t(f)];
+        ++total;
+      }
+      for (int f = 0; f < folds; ++f) {
+        EXPECT_GT(count[size_t(f)], 0.75 * total / folds)
+            << folds << " folds, every " << period << "th held out, fold " << f;
+        EXPECT_LT(count[size_t(f)], 1.25 * total / folds)
+            << folds << " folds, every " << period << "th held out, fold " << f;
+      }
+    }
+  }
+}
+
 TEST(MaterialClusters, DisabledOrLambertOnlyFitsDoNothingAndOptionsAreChecked) {
   std::vector<TexelFit> fits = {DonorFit(Glossy()), RecipientFit(kGlossyAlbedo)};
   const FitStore store = StoreOf(fits);
