@@ -94,8 +94,6 @@ struct LobeTransferOptions {
   Status Validate() const;
 };
 
-// Material clusters (engine/fit/material_clusters.h): after lobe transfer, the texels still
-// without a lobe take one their material's pooled samples support. Applied by RunFit.
 // Per-texel model choice between a texel's lobe and its material's (MaterialClusterOptions).
 enum class ModelChoice { kKFold, kBic };
 const char* ModelChoiceName(ModelChoice choice);  // "kfold", "bic"
@@ -103,6 +101,8 @@ StatusOr<ModelChoice> ParseModelChoice(const std::string& name);
 // Most folds the k-fold comparison takes (per-fold sums on the stack).
 constexpr int kMaxModelFolds = 20;
 
+// Material clusters (engine/fit/material_clusters.h): after lobe transfer, the texels still
+// without a lobe take one their material's pooled samples support. Applied by RunFit.
 struct MaterialClusterOptions {
   bool enabled = true;
   // Albedo-space units (material_clusters.h step 1). Chromaticity 0.02: the synth's and
