@@ -312,9 +312,13 @@ Status FitOptionsFromJson(const Json& json, const std::string& file, FitOptions*
   REFLCAP_RETURN_IF_ERROR(Field(c, "lobes_per_cluster", file, wc, &o->clusters.lobes_per_cluster));
   // Absent in files written before the k-fold choice existed: those chose by the criterion.
   std::string choice = "bic";
-  if (c.contains("model_choice")) REFLCAP_RETURN_IF_ERROR(Field(c, "model_choice", file, wc, &choice));
+  if (c.contains("model_choice")) {
+    REFLCAP_RETURN_IF_ERROR(Field(c, "model_choice", file, wc, &choice));
+  }
   auto parsed_choice = ParseModelChoice(choice);
-  if (!parsed_choice.ok()) return DataLossError(file, ": ", wc, "model_choice: \"", choice, "\" is not kfold or bic");
+  if (!parsed_choice.ok()) {
+    return DataLossError(file, ": ", wc, "model_choice: \"", choice, "\" is not kfold or bic");
+  }
   o->clusters.model_choice = *parsed_choice;
   if (c.contains("folds")) REFLCAP_RETURN_IF_ERROR(Field(c, "folds", file, wc, &o->clusters.folds));
   const Json& a = json["albedo_fill"];

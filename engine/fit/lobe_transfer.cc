@@ -82,6 +82,22 @@ UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta) {
   return u;
 }
 
+std::array<float, brdf::kMaxParamsPerChannel> LobeChannel(const brdf::BrdfParams* params, int c) {
+  std::array<float, brdf::kMaxParamsPerChannel> channel{};
+  if (params) channel = params->Channel(c);
+  channel[0] = 0;  // the lobe part only
+  return channel;
+}
+
+bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const float* channel,
+                     int lobes, double* w, double* e) {
+  const float weight = s.weight[c], y = s.value[c];
+  if (!u.usable || !(weight > 0) || !std::isfinite(weight) || !std::isfinite(y)) return false;
+  *w = weight;
+  *e = double(y) - double(brdf::EvalChannel(u.wi, u.wo, channel, lobes));
+  return true;
+}
+
 // Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null) and
 // its cost, in one pass: with e = y - lobe, S0 = sum w, S1 = sum w e, S2 = sum w e^2, the
 // least-squares diffuse level is d = max(0, S1 / S0) and the cost 1/2 (S2 - 2 d S1 + d^2 S0).
@@ -89,16 +105,12 @@ double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSamp
                        const brdf::BrdfParams* params, std::array<float, brdf::kChannels>* rho) {
   double cost = 0;
   for (int c = 0; c < brdf::kChannels; ++c) {
-    std::array<float, brdf::kMaxParamsPerChannel> channel{};
-    if (params) channel = params->Channel(c);
-    channel[0] = 0;  // the lobe part only
+    const auto channel = LobeChannel(params, c);
     const int lobes = params ? params->num_lobes : 0;
     double s0 = 0, s1 = 0, s2 = 0;
     for (size_t i = 0; i < count; ++i) {
-      const float w = samples[i].weight[c], y = samples[i].value[c];
-      if (!usable[i].usable || !(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
-      const double e =
-          y - (lobes ? brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes) : 0.0);
+      double w, e;
+      if (!ChannelResidual(samples[i], usable[i], c, channel.data(), lobes, &w, &e)) continue;
       s0 += w;
       s1 += w * e;
       s2 += w * e * e;

@@ -89,6 +89,16 @@ struct UsableSample {
 };
 UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta);
 
+// Channel c of `params` in the EvalChannel layout with the albedo slot zeroed: its lobes only
+// (no term at all when `params` is null).
+std::array<float, brdf::kMaxParamsPerChannel> LobeChannel(const brdf::BrdfParams* params, int c);
+
+// Sample s's channel c as a weighted residual against the model `channel` (EvalChannel layout,
+// `lobes` lobes): false when it is none (the sample not usable, its weight not > 0 or either
+// value non-finite); else *w its weight and *e = y - f(wi, wo).
+bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const float* channel,
+                     int lobes, double* w, double* e);
+
 // Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null),
 // written to `rho`, and the summed cost 1/2 sum w r^2 over the usable samples.
 double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,

@@ -152,7 +152,7 @@ bool MaterialClusters::PoolIn(uint64_t first, uint64_t end) const {
 
 bool MaterialClusters::KeptIn(uint64_t first, uint64_t end) const {
   for (uint64_t t = first; t < end && t < cluster_of.size(); ++t) {
-    if (cluster_of[t] >= 0 && lend_from[size_t(cluster_of[t])] >= 0) return true;
+    if (LenderOf(t) >= 0) return true;
   }
   return false;
 }
@@ -571,27 +571,18 @@ bool EveryFoldHeld(const BrdfSample* samples, size_t count, const UsableSample* 
 // is no evidence either way; costs are 1/2 sum w r^2 with w the inverse variance.
 constexpr double kKFoldMargin = 0.5;
 
-bool Residual(const BrdfSample& s, int c) {
-  const float w = s.weight[c], y = s.value[c];
-  return w > 0 && std::isfinite(w) && std::isfinite(y);
-}
-
 // The held-out cost of `params`' lobes (none when null) with the albedo re-fitted per fold on
 // the other folds: sum over folds of 1/2 sum w (y - rho_f / pi - lobe)^2 over the fold's samples.
 double CrossValidatedLobeCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
                               const brdf::BrdfParams* params, int folds) {
   double cost = 0;
   for (int c = 0; c < brdf::kChannels; ++c) {
-    std::array<float, brdf::kMaxParamsPerChannel> channel{};
-    if (params) channel = params->Channel(c);
-    channel[0] = 0;  // the lobe part only
+    const auto channel = LobeChannel(params, c);
     const int lobes = params ? params->num_lobes : 0;
     std::array<double, kMaxModelFolds> s0{}, s1{}, s2{};
     for (size_t i = 0; i < count; ++i) {
-      if (!usable[i].usable || !Residual(samples[i], c)) continue;
-      const double w = samples[i].weight[c];
-      const double e = samples[i].value[c] -
-                       (lobes ? brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), lobes) : 0.0);
+      double w, e;
+      if (!ChannelResidual(samples[i], usable[i], c, channel.data(), lobes, &w, &e)) continue;
       const int f = FoldOf(samples[i], folds);
       s0[size_t(f)] += w;
       s1[size_t(f)] += w * e;
@@ -618,14 +609,13 @@ double HeldOutFitCost(const BrdfSample* samples, size_t count, const UsableSampl
                       const std::vector<const brdf::BrdfParams*>& fold_fit, int folds) {
   double cost = 0;
   for (size_t i = 0; i < count; ++i) {
-    if (!usable[i].usable) continue;
     const brdf::BrdfParams& p = *fold_fit[size_t(FoldOf(samples[i], folds))];
     for (int c = 0; c < brdf::kChannels; ++c) {
-      if (!Residual(samples[i], c)) continue;
-      const auto channel = p.Channel(c);
-      const double e = samples[i].value[c] -
-                       brdf::EvalChannel(usable[i].wi, usable[i].wo, channel.data(), p.num_lobes);
-      cost += 0.5 * samples[i].weight[c] * e * e;
+      double w, e;
+      const auto channel = p.Channel(c);  // the whole model: albedo and lobes
+      if (ChannelResidual(samples[i], usable[i], c, channel.data(), p.num_lobes, &w, &e)) {
+        cost += 0.5 * w * e * e;
+      }
     }
   }
   return cost;
@@ -640,7 +630,8 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
                          ProblemsPerTexel(options.lobe_model);
   std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
   std::atomic<size_t> sparse_lent{0};
-  const int folds = options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0;
+  const int folds =
+      options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0;
   // k-fold: the texels with a lobe of their own that a cluster offers lobes to are fitted again
   // without each fold (the CPU batched fitter, whatever backend made the fit: every backend then
   // gets the same choice from the same fits).
@@ -654,7 +645,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       for (int64_t ii = begin; ii < end; ++ii) {
         const uint32_t i = uint32_t(ii);
         const size_t t = size_t(chunk.first_texel) + i;
-        const int32_t k = clusters.cluster_of[t] < 0 ? -1 : clusters.lend_from[size_t(clusters.cluster_of[t])];
+        const int32_t k = clusters.LenderOf(t);
         if (k < 0 || fits->status(t) == FitStatus::kNonFiniteInput || fits->lambert_only(t) ||
             fits->donor(t) != FitStore::kNoDonor || fits->samples(t) < kMinTransferSamples) {
           continue;
@@ -701,9 +692,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
       // The cluster whose lobes it is offered (its own, or the lender of one without evidence).
-      const int32_t k = clusters.cluster_of[t] < 0
-                            ? -1
-                            : clusters.lend_from[size_t(clusters.cluster_of[t])];
+      const int32_t k = clusters.LenderOf(t);
       if (status == FitStatus::kNonFiniteInput || fits->donor(t) == FitStore::kClusterLobe) continue;
       const bool sparse = fits->samples(t) < kMinTransferSamples;
       if (sparse) {

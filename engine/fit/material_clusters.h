@@ -133,7 +133,11 @@ struct MaterialClusters {
 
   // True when some pool texel of some cluster lies in texels [first, end).
   bool PoolIn(uint64_t first, uint64_t end) const;
-  // True when some texel in [first, end) belongs to a cluster that kept a lobe.
+  // The cluster whose kept lobes texel t is offered: lend_from of its cluster, -1 for none.
+  int32_t LenderOf(size_t t) const {
+    return cluster_of[t] < 0 ? -1 : lend_from[size_t(cluster_of[t])];
+  }
+  // True when some texel in [first, end) is offered a cluster's kept lobes.
   bool KeptIn(uint64_t first, uint64_t end) const;
 };
 

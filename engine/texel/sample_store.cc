@@ -567,7 +567,9 @@ StatusOr<TexelSampleChunk> SampleStoreReader::ReadChunk(uint32_t index) const {
     // failure in part order is reported, whichever thread met it.
     std::vector<Status> reads(parts_.size());
     ParallelFor(0, int64_t(parts_.size()), 1, [&](int64_t b, int64_t e, int) {
-      for (int64_t i = b; i < e; ++i) reads[size_t(i)] = parts_[size_t(i)]->ReadChunkInto(index, &pieces[size_t(i)]);
+      for (int64_t i = b; i < e; ++i) {
+        reads[size_t(i)] = parts_[size_t(i)]->ReadChunkInto(index, &pieces[size_t(i)]);
+      }
     });
     Status read;
     for (const Status& r : reads) {
