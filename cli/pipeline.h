@@ -20,6 +20,9 @@ struct PipelineOptions {
   fit::VulkanFitterOptions fit_vulkan;  // --vulkan-kernel, --cluster-size (device: fit_device)
   std::string fit_backend_choice;  // how --backend auto chose, for fit_report.json
   fit::FitOptions fit;
+  // The holdout render's interreflection (--indirect, --indirect-bounces, --indirect-rays).
+  render::IndirectMode indirect = render::IndirectMode::kAuto;
+  int indirect_bounces = 2, indirect_rays = 64;
   bool overwrite = false;
 };
 struct PipelineSummary {

@@ -20,7 +20,8 @@ namespace fs = std::filesystem;
 
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
-  int supersample = 1, writers = 0;
+  int supersample = 1, writers = 0, indirect_bounces = 2, indirect_rays = 64;
+  std::string indirect = "auto";
   bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -50,6 +51,12 @@ int RunRender(int argc, char** argv) {
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: no cast shadows from the height field integrated from the "
                "normal map (mesh captures keep theirs)");
+  args.AddString("indirect", &indirect, "MODE",
+                 "interreflection, mesh captures: auto (default: added when the train "
+                 "photographs show light where no direct light reaches), on or off");
+  args.AddInt("indirect-bounces", &indirect_bounces, "bounces of interreflection, 1..8 (default 2)");
+  args.AddInt("indirect-rays", &indirect_rays,
+              "rays per texel gathering interreflection, 1..1024 (default 64)");
   args.AddInt("writers", &writers,
               "threads writing the output files while later images render (default 0: one per "
               "hardware thread)");
@@ -87,6 +94,16 @@ int RunRender(int argc, char** argv) {
   if (!shadow_map.empty() && backend != "vulkan") return usage("--shadow-map needs --backend vulkan");
   if (!shadow_map.empty() && shadow_map != "auto" && shadow_map != "cube" && shadow_map != "fitted") {
     return usage("--shadow-map: \"" + shadow_map + "\" is not one of auto, cube, fitted");
+  }
+  auto indirect_mode = render::ParseIndirectMode(indirect, "--indirect");
+  if (!indirect_mode.ok()) return usage(indirect_mode.status().message());
+  if (indirect_bounces < 1 || indirect_bounces > render::kMaxIndirectBounces) {
+    return usage(StrCat("--indirect-bounces must be in [1, ", render::kMaxIndirectBounces,
+                        "], got ", indirect_bounces));
+  }
+  if (indirect_rays < 1 || indirect_rays > render::kMaxIndirectRays) {
+    return usage(StrCat("--indirect-rays must be in [1, ", render::kMaxIndirectRays, "], got ",
+                        indirect_rays));
   }
   auto parsed_shard = ParseShard(shard_text);  // "" = every selected photograph
   if (!parsed_shard.ok()) return usage(parsed_shard.status().message());
@@ -129,6 +146,9 @@ int RunRender(int argc, char** argv) {
   options.cast_shadows = !no_shadows;
   options.height_shadows = !no_height_shadows;
   options.writers = writers;
+  options.indirect = *indirect_mode;
+  options.indirect_bounces = indirect_bounces;
+  options.indirect_rays = indirect_rays;
   options.shard = shard;
   std::string device_name = "the cpu";
   StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");

@@ -104,6 +104,9 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   // One switch for both stages: a normal-map capture's height-field shadows reject train samples
   // and darken the holdout renders, or (--no-height-shadows) neither.
   render_options.height_shadows = options.resample.height_shadows;
+  render_options.indirect = options.indirect;
+  render_options.indirect_bounces = options.indirect_bounces;
+  render_options.indirect_rays = options.indirect_rays;
   bool rendered = false;
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER
   // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
@@ -172,6 +175,14 @@ int RunRun(int argc, char** argv) {
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: no cast shadows from the height field integrated from the "
                "normal map, neither rejecting train samples nor in the holdout renders");
+  std::string indirect = "auto";
+  args.AddString("indirect", &indirect, "MODE",
+                 "holdout render's interreflection: auto (default: when the train photographs "
+                 "show light where no direct light reaches), on or off");
+  args.AddInt("indirect-bounces", &options.indirect_bounces,
+              "bounces of interreflection, 1..8 (default 2)");
+  args.AddInt("indirect-rays", &options.indirect_rays,
+              "rays per texel gathering interreflection, 1..1024 (default 64)");
   args.AddString("backend", &backend, "NAME",
                  "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
@@ -191,6 +202,21 @@ int RunRun(int argc, char** argv) {
     return kExitUsage;
   }
   options.resample.height_shadows = !no_height_shadows;
+  {
+    auto mode = render::ParseIndirectMode(indirect, "--indirect");
+    if (!mode.ok()) {
+      std::fprintf(stderr, "reflcap run: %s\n", mode.status().message().c_str());
+      return kExitUsage;
+    }
+    options.indirect = *mode;
+    render::CaptureRenderOptions check;
+    check.indirect_bounces = options.indirect_bounces;
+    check.indirect_rays = options.indirect_rays;
+    if (Status s = check.Validate(); !s.ok()) {
+      std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+      return kExitUsage;
+    }
+  }
   if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
     std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
     return kExitUsage;

@@ -28,10 +28,17 @@ struct RayGenerator {
   }
 };
 
-// Texel whose parameters shade a hit: the atlas pixel under the hit's UV. Conservative atlas
-// coverage guarantees one for UVs inside a triangle; rounding at a chart border can land one
-// pixel off, so the 3x3 neighbourhood is searched before giving up (-1).
-int TexelOfHit(const TexelAtlas& atlas, const Vec2f& uv) {
+}  // namespace
+
+Status RenderOptions::Validate() const {
+  if (supersampling < 1 || supersampling > kMaxSupersampling) {
+    return InvalidArgumentError("supersampling must be in [1, ", kMaxSupersampling, "], got ",
+                                supersampling);
+  }
+  return OkStatus();
+}
+
+int TexelUnderUv(const TexelAtlas& atlas, const Vec2f& uv) {
   int x, y;
   atlas.PixelOfUv(uv.x(), uv.y(), &x, &y);
   int t = atlas.TexelAt(x, y);
@@ -44,16 +51,6 @@ int TexelOfHit(const TexelAtlas& atlas, const Vec2f& uv) {
     }
   }
   return -1;
-}
-
-}  // namespace
-
-Status RenderOptions::Validate() const {
-  if (supersampling < 1 || supersampling > kMaxSupersampling) {
-    return InvalidArgumentError("supersampling must be in [1, ", kMaxSupersampling, "], got ",
-                                supersampling);
-  }
-  return OkStatus();
 }
 
 StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& camera,
@@ -126,7 +123,7 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& came
     }
     const auto& cuv = mesh.corner_uvs[hit.triangle];
     const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
-    const int texel = TexelOfHit(atlas, uv);
+    const int texel = TexelUnderUv(atlas, uv);
     if (texel < 0) return true;
     // The texel's tangent frame, re-orthogonalised against the normal at the hit.
     Vec3f t = atlas.tangent[texel] - n_s * n_s.dot(atlas.tangent[texel]);

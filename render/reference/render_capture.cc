@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -14,6 +15,7 @@
 #include "engine/core/parallel.h"
 #include "engine/core/progress.h"
 #include "engine/image/exr_io.h"
+#include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
 #include "engine/mesh/mesh_io.h"
 #include "engine/core/worker_pool.h"
@@ -29,7 +31,125 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Auto interreflection (CaptureRenderOptions::indirect): the evidence is read from up to this
+// many train photographs, evenly spaced over the split (a dozen views and lights decide it; more
+// only costs reading time).
+constexpr int kIndirectEvidenceImages = 12;
+// Fewer unlit pixels than this over those photographs decide nothing: the indirect light is
+// then left out (nothing in the photographs asks for it).
+constexpr size_t kMinIndirectEvidencePixels = 1000;
+// The evidence's gather table has at most this many rays per texel: its estimate is noisier per
+// texel but unbiased, and the decision sums over thousands of pixels; a capture that shows no
+// interreflection (every synthetic one) then pays a quarter of the full table's rays.
+constexpr int kIndirectEvidenceRays = 16;
+// The indirect light is added when it removes at least this share of the squared error of the
+// photographs' unlit pixels (which a direct-light render leaves black). A capture without
+// interreflection (direct-light synthetic) gains nothing — adding light there only adds error —
+// and a physical one gains most of it (suzanne: 0.8). A quarter keeps a prediction that is right
+// in kind but weak in level, and refuses one that is mostly noise.
+constexpr double kMinIndirectErrorReduction = 0.25;
+
 }  // namespace
+
+StatusOr<IndirectMode> ParseIndirectMode(const std::string& text, const std::string& option) {
+  if (text == "auto") return IndirectMode::kAuto;
+  if (text == "on") return IndirectMode::kOn;
+  if (text == "off") return IndirectMode::kOff;
+  return InvalidArgumentError(option, ": \"", text, "\" is not one of auto, on, off");
+}
+
+const char* IndirectModeName(IndirectMode mode) {
+  switch (mode) {
+    case IndirectMode::kAuto: return "auto";
+    case IndirectMode::kOn: return "on";
+    default: return "off";
+  }
+}
+
+StatusOr<IndirectEvidence> MeasureIndirectEvidence(const FittedCapture& fitted,
+                                                   const IndirectLight& indirect, int bounces,
+                                                   bool cast_shadows) {
+  const Capture& capture = *fitted.capture;
+  REFLCAP_CHECK(!fitted.normal_map && fitted.scene != nullptr);
+  std::vector<size_t> pool;
+  for (size_t i = 0; i < capture.images.size(); ++i) {
+    if (capture.images[i].split == Split::kTrain) pool.push_back(i);
+  }
+  IndirectEvidence evidence;
+  if (pool.empty()) return evidence;
+  const size_t take = std::min(pool.size(), size_t(kIndirectEvidenceImages));
+  double pq = 0, qq = 0, pp = 0;
+  RenderOptions direct;
+  direct.cast_shadows = cast_shadows;
+  direct.aux_buffers = true;
+  for (size_t j = 0; j < take; ++j) {
+    const size_t index = pool[j * pool.size() / take];
+    const CaptureImage& image = capture.images[index];
+    const Camera& camera = capture.cameras[image.camera];
+    // The evidence is advice on photographs that are not rendered: one that cannot be rendered
+    // or read is left out with a warning (a selected photograph reports its own error).
+    StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);
+    StatusOr<Image> read = ReadImageRgb(capture.Resolve(image.file));
+    Status problem = !rendered.ok() ? rendered.status() : read.status();
+    if (problem.ok() && (read->width != camera.width || read->height != camera.height)) {
+      problem = InvalidArgumentError(capture.Resolve(image.file).string(), ": ", read->width, "x",
+                                     read->height, " pixels, but camera \"", camera.id, "\" is ",
+                                     camera.width, "x", camera.height);
+    }
+    if (!problem.ok()) {
+      REFLCAP_LOG(kWarning) << "render: interreflection evidence leaves out images[" << index
+                            << "]: " << problem.message();
+      ++evidence.skipped;
+      continue;
+    }
+    const RenderResult& lit = *rendered;
+    const Image& photo = *read;
+    const Rigid3 world_from_object = capture.WorldFromObject(image);
+    const std::vector<Vec3f> radiance =
+        indirect.TexelRadiance(*fitted.scene, fitted.atlas, fitted.maps,
+                               capture.lights[image.light], world_from_object.Inverse(), bounces,
+                               cast_shadows);
+    Image predicted(camera.width, camera.height, 3, 0.0f);
+    AddTexelRadiance(*fitted.scene, fitted.atlas, camera, world_from_object, image.exposure_s, 1,
+                     radiance, &predicted);
+    // A pixel whose 3x3 neighbourhood is object without direct light: away from silhouettes and
+    // shadow edges, where the photograph's pixel filter mixes in lit surface or background.
+    auto unlit = [&](int x, int y) {
+      const float* a = lit.aux.pixel(x, y);
+      return a[kAuxMask] > 0.5f && (a[kAuxCosThetaI] <= 0 || a[kAuxCastShadow] > 0.5f);
+    };
+    for (int y = 1; y + 1 < camera.height; ++y) {
+      for (int x = 1; x + 1 < camera.width; ++x) {
+        bool ok = true;
+        for (int dy = -1; dy <= 1 && ok; ++dy) {
+          for (int dx = -1; dx <= 1 && ok; ++dx) ok = unlit(x + dx, y + dy);
+        }
+        if (!ok) continue;
+        const float* p = photo.pixel(x, y);
+        const float* q = predicted.pixel(x, y);
+        bool usable = true;
+        for (int c = 0; c < 3; ++c) {
+          usable = usable && std::isfinite(p[c]) &&
+                   (image.saturation <= 0 || double(p[c]) < image.saturation);
+        }
+        if (!usable) continue;
+        ++evidence.pixels;
+        for (int c = 0; c < 3; ++c) {
+          pq += double(p[c]) * q[c];
+          qq += double(q[c]) * q[c];
+          pp += double(p[c]) * p[c];
+        }
+      }
+    }
+    ++evidence.images;
+  }
+  evidence.scale = qq > 0 ? pq / qq : 0.0;
+  // Σ (p - q)² = pp - 2 pq + qq against Σ p² (the error of the direct-light render there).
+  evidence.error_reduction = pp > 0 ? (2 * pq - qq) / pp : 0.0;
+  evidence.shows = evidence.pixels >= kMinIndirectEvidencePixels &&
+                   evidence.error_reduction >= kMinIndirectErrorReduction;
+  return evidence;
+}
 
 StatusOr<SplitSelection> ParseSplitSelection(const std::string& text, const std::string& option) {
   if (text == "holdout") return SplitSelection::kHoldout;
@@ -158,8 +278,8 @@ CaptureRenderBackend CpuCaptureRenderBackend() {
   CaptureRenderBackend b;
   b.backend = "cpu";
   b.device = "cpu";
-  b.renderer = "CPU reference renderer (render/reference): direct light, Embree shadow rays, "
-               "no interreflection";
+  b.renderer = "CPU reference renderer (render/reference): direct light, Embree shadow rays "
+               "(interreflection, when on, is added on the CPU for every backend)";
   b.render = RenderCaptureImage;
   return b;
 }
@@ -177,6 +297,14 @@ Status CaptureRenderOptions::Validate() const {
   }
   if (writers < 0 || writers > 256) {
     return InvalidArgumentError("writers must be in [0, 256], got ", writers);
+  }
+  if (indirect_bounces < 1 || indirect_bounces > kMaxIndirectBounces) {
+    return InvalidArgumentError("indirect bounces must be in [1, ", kMaxIndirectBounces, "], got ",
+                                indirect_bounces);
+  }
+  if (indirect_rays < 1 || indirect_rays > kMaxIndirectRays) {
+    return InvalidArgumentError("indirect rays must be in [1, ", kMaxIndirectRays, "], got ",
+                                indirect_rays);
   }
   return OkStatus();
 }
@@ -221,6 +349,57 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                            LoadFittedCapture(capture, params_exr,
                                              options.cast_shadows && options.height_shadows));
   summary.texels = fitted->atlas.TexelCount();
+  // Interreflection: the gather table, and (auto) whether the photographs show it.
+  std::unique_ptr<IndirectLight> indirect;
+  Json indirect_report = {{"mode", IndirectModeName(options.indirect)}, {"used", false}};
+  if (fitted->normal_map) {
+    indirect_report["why_not"] = "a normal-map capture has no surface to bounce light from";
+  } else if (options.indirect != IndirectMode::kOff) {
+    bool use = options.indirect == IndirectMode::kOn;
+    if (options.indirect == IndirectMode::kAuto) {
+      const auto t1 = std::chrono::steady_clock::now();
+      REFLCAP_ASSIGN_OR_RETURN(
+          IndirectLight coarse,
+          IndirectLight::Build(*fitted->scene, fitted->atlas,
+                               std::min(options.indirect_rays, kIndirectEvidenceRays)));
+      REFLCAP_ASSIGN_OR_RETURN(IndirectEvidence evidence,
+                               MeasureIndirectEvidence(*fitted, coarse, options.indirect_bounces,
+                                                       options.cast_shadows));
+      indirect_report["evidence"] = {{"images", evidence.images},
+                                     {"pixels", evidence.pixels},
+                                     {"skipped_images", evidence.skipped},
+                                     {"scale", evidence.scale},
+                                     {"error_reduction", evidence.error_reduction},
+                                     {"min_pixels", kMinIndirectEvidencePixels},
+                                     {"min_error_reduction", kMinIndirectErrorReduction},
+                                     {"rays_per_texel", coarse.rays()},
+                                     {"seconds", SecondsSince(t1)}};
+      use = evidence.shows;
+      if (!use) indirect_report["why_not"] = "the train photographs show no interreflection";
+    }
+    if (use) {
+      const auto t0 = std::chrono::steady_clock::now();
+      REFLCAP_ASSIGN_OR_RETURN(IndirectLight table,
+                               IndirectLight::Build(*fitted->scene, fitted->atlas,
+                                                    options.indirect_rays));
+      indirect_report["table_s"] = SecondsSince(t0);
+      indirect = std::make_unique<IndirectLight>(std::move(table));
+      indirect_report["used"] = true;
+      indirect_report["bounces"] = options.indirect_bounces;
+      indirect_report["rays_per_texel"] = options.indirect_rays;
+    }
+    REFLCAP_LOG(kInfo) << "render: interreflection " << (use ? "on" : "off") << " ("
+                       << IndirectModeName(options.indirect)
+                       << (indirect_report.contains("evidence")
+                               ? StrCat(": where no direct light reaches, it changes the "
+                                        "train photographs' squared error by ",
+                                        std::lround(-100 * indirect_report["evidence"]
+                                                               ["error_reduction"]
+                                                                   .get<double>()),
+                                        " %")
+                               : std::string())
+                       << ")";
+  }
   summary.num_lobes = fitted->maps.num_lobes;
   if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
   // Every output folder exists before the writers start (they run concurrently).
@@ -274,6 +453,16 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
       const auto now = std::chrono::steady_clock::now();
       timings[k].render_s = std::chrono::duration<double>(now - last_delivery).count();
       last_delivery = now;
+      if (indirect != nullptr) {
+        const CaptureImage& image = capture.images[selected[k]];
+        const Rigid3 world_from_object = capture.WorldFromObject(image);
+        const std::vector<Vec3f> radiance = indirect->TexelRadiance(
+            *fitted->scene, fitted->atlas, fitted->maps, capture.lights[image.light],
+            world_from_object.Inverse(), options.indirect_bounces, options.cast_shadows);
+        AddTexelRadiance(*fitted->scene, fitted->atlas, capture.cameras[image.camera],
+                         world_from_object, image.exposure_s, options.supersampling, radiance,
+                         &r.pixels);
+      }
       auto result = std::make_shared<RenderResult>(std::move(r));
       writers.Submit([&, k, result] {
         if (stop) return;
@@ -338,6 +527,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
       {"atlas", {{"width", fitted->atlas.width}, {"height", fitted->atlas.height},
                  {"texels", fitted->atlas.TexelCount()}}},
       {"num_lobes", fitted->maps.num_lobes},
+      {"indirect", indirect_report},
       {"aux_channels",
        {{"cast_shadow", "1 where the point faces the light but the segment to it is blocked"},
         {"cos_theta_i", "shading normal . direction to the light (signed)"},
@@ -394,7 +584,10 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
           {"split", SplitSelectionName(options.split)},
           {"supersampling", options.supersampling},
           {"cast_shadows", options.cast_shadows},
-          {"height_shadows", options.height_shadows}}}};
+          {"height_shadows", options.height_shadows},
+          {"indirect", IndirectModeName(options.indirect)},
+          {"indirect_bounces", options.indirect_bounces},
+          {"indirect_rays", options.indirect_rays}}}};
   }
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "render_report.json", report.dump(2) + "\n"));
   return summary;

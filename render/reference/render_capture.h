@@ -28,6 +28,7 @@
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
 #include "engine/texel/brdf_maps.h"
+#include "render/reference/indirect_light.h"
 #include "render/reference/reference_renderer.h"
 
 namespace reflcap::render {
@@ -75,6 +76,11 @@ StatusOr<std::unique_ptr<FittedCapture>> LoadFittedCapture(const Capture& captur
 StatusOr<RenderResult> RenderCaptureImage(const FittedCapture& fitted, size_t index,
                                           const RenderOptions& options);
 
+enum class IndirectMode { kAuto, kOn, kOff };
+// "auto", "on", "off"; anything else is InvalidArgument naming `option`.
+StatusOr<IndirectMode> ParseIndirectMode(const std::string& text, const std::string& option);
+const char* IndirectModeName(IndirectMode mode);
+
 struct CaptureRenderOptions {
   SplitSelection split = SplitSelection::kHoldout;
   int supersampling = 1;     // N x N samples per pixel, [1, kMaxSupersampling]; mesh captures
@@ -82,6 +88,12 @@ struct CaptureRenderOptions {
   // Normal-map captures: cast shadows from the height field integrated from the normal map (with
   // cast_shadows; false = none, as before the height field). Mesh captures ignore it.
   bool height_shadows = true;
+  // Interreflection (indirect_light.h), mesh captures: kOff renders direct light only; kOn adds
+  // `indirect_bounces` bounces gathered over `indirect_rays` rays per texel; kAuto adds them when
+  // the capture's train photographs show light where no direct light reaches (IndirectEvidence).
+  IndirectMode indirect = IndirectMode::kAuto;
+  int indirect_bounces = 2;  // [1, kMaxIndirectBounces]
+  int indirect_rays = 64;    // [1, kMaxIndirectRays]
   // Threads writing the output files while later images render (EXR compression is most of a
   // GPU render's time); 0 = one per hardware thread. [0, 256].
   int writers = 0;
@@ -91,6 +103,28 @@ struct CaptureRenderOptions {
   Shard shard;
   Status Validate() const;
 };
+
+// Whether a capture's photographs show interreflection (CaptureRenderOptions::indirect = kAuto):
+// up to 12 train photographs, evenly spaced, are rendered with direct light and with the indirect
+// light alone; over the pixels whose 3x3 neighbourhood is object without direct light (facing away
+// from the light, or cast-shadowed; unsaturated, finite), `scale` = Σ photo · indirect / Σ
+// indirect² (~0 when the photographs are black there, ~1 when the prediction explains them) and
+// `error_reduction` = 1 − Σ (photo − indirect)² / Σ photo², the share of those pixels' squared
+// error (against a black direct-light render) that adding the indirect light removes. `shows`
+// when at least 1000 such pixels were seen and error_reduction ≥ 0.25. A photograph that cannot
+// be rendered or read, or whose size is not its camera's, is left out (`skipped`, with a
+// warning naming it): the evidence advises, and a selected photograph reports its own error.
+struct IndirectEvidence {
+  int images = 0;
+  int skipped = 0;
+  size_t pixels = 0;
+  double scale = 0;
+  double error_reduction = 0;
+  bool shows = false;
+};
+StatusOr<IndirectEvidence> MeasureIndirectEvidence(const FittedCapture& fitted,
+                                                   const IndirectLight& indirect, int bounces,
+                                                   bool cast_shadows);
 
 struct CaptureRenderSummary {
   size_t images = 0;

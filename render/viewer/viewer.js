@@ -5,7 +5,7 @@
 // The shader is the same model, in the same order, as the CPU reference renderer
 // (render/reference/reference_renderer.cc, RenderImage's `shade`) and its BRDF twin
 // (engine/brdf/lafortune.h, EvalChannel / LafortuneLobe; shaders/common for GLSL): the texel under
-// the UV (TexelAtlas::PixelOfUv with kTexelTieOffset, then the 3x3 search of TexelOfHit), its
+// the UV (TexelAtlas::PixelOfUv with kTexelTieOffset, then the 3x3 search of TexelUnderUv), its
 // tangent frame re-orthogonalised against the interpolated normal, a lobe 0 where its base
 // <= kPowBaseMin and saturated at kMaxLobeValue, black for back faces, unlit points and views
 // below the shading normal. No cast shadows (the CPU reference traces them; this page does not).
@@ -88,7 +88,7 @@
 
     bool isTexel(ivec2 p) { return texelFetch(rhoTex, p, 0).a > 0.5; }
 
-    // TexelOfHit: the atlas pixel under the UV, else the first texel of its 3x3 neighbourhood.
+    // TexelUnderUv: the atlas pixel under the UV, else the first texel of its 3x3 neighbourhood.
     bool texelOfHit(vec2 uv, out ivec2 texel) {
       float fx = floor(uv.x * float(atlasSize.x) + kTexelTieOffset);
       float fy = floor((1.0 - uv.y) * float(atlasSize.y) + kTexelTieOffset);

@@ -497,6 +497,86 @@ TEST(RenderCapture, WriterCountChangesNoFileAndBadOptionsAreRefused) {
   EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
 }
 
+// Interreflection (indirect_light.h) is added under --indirect auto only when the train
+// photographs show light where no direct light reaches. A synthetic capture is rendered with
+// direct light only: its unlit pixels hold noise, and the indirect light stays off. The same
+// capture with every photograph replaced by a render that has the indirect light shows it
+// exactly, and the auto render then reproduces those photographs.
+TEST(RenderCapture, InterreflectionIsAddedOnlyWhenThePhotographsShowIt) {
+  testing::ScratchDir dir;
+  ASSERT_TRUE(Synth(dir / "capture", 0.01, 64, 2).ok());
+  auto capture = ReadCapture(dir / "capture");
+  ASSERT_TRUE(capture.ok());
+  const fs::path gt = dir / "capture/gt/params.exr";
+  auto evidence_of = [&](const Capture& c) {
+    auto fitted = render::LoadFittedCapture(c, gt);
+    REFLCAP_CHECK(fitted.ok()) << fitted.status().ToString();
+    auto table = render::IndirectLight::Build(*(*fitted)->scene, (*fitted)->atlas, 16);
+    REFLCAP_CHECK(table.ok());
+    auto evidence = render::MeasureIndirectEvidence(**fitted, *table, 2, true);
+    REFLCAP_CHECK(evidence.ok()) << evidence.status().ToString();
+    return *evidence;
+  };
+  const render::IndirectEvidence direct_only = evidence_of(*capture);
+  std::printf("direct-light photographs: %zu unlit pixels in %d images, scale %.3f, error "
+              "reduction %.3f\n", direct_only.pixels, direct_only.images, direct_only.scale,
+              direct_only.error_reduction);
+  EXPECT_GE(direct_only.pixels, size_t(1000)) << "the test scene has too few unlit pixels";
+  EXPECT_FALSE(direct_only.shows);
+  // Adding light to pixels that hold noise removes none of their error (it adds a little).
+  EXPECT_LT(direct_only.error_reduction, 0.01);
+
+  render::CaptureRenderOptions auto_options;
+  auto_options.split = render::SplitSelection::kHoldout;
+  auto_options.indirect_rays = 16;
+  ASSERT_TRUE(render::RenderCapture(*capture, gt, dir / "auto_direct", auto_options).ok());
+  Json report = Json::parse(ReadTextFile(dir / "auto_direct/render_report.json").value());
+  EXPECT_EQ(report["indirect"]["mode"], "auto");
+  EXPECT_EQ(report["indirect"]["used"], false);
+
+  // Photographs with interreflection: every image rendered with it, written over the photograph.
+  render::CaptureRenderOptions on = auto_options;
+  on.split = render::SplitSelection::kAll;
+  on.indirect = render::IndirectMode::kOn;
+  ASSERT_TRUE(render::RenderCapture(*capture, gt, dir / "with_indirect", on).ok());
+  double added = 0;
+  for (const CaptureImage& image : capture->images) {
+    auto photo = ReadExrRgb(capture->Resolve(image.file));
+    auto lit = ReadExrRgb(dir / "with_indirect" / render::RenderPathFor(image.file));
+    ASSERT_TRUE(photo.ok() && lit.ok());
+    ASSERT_TRUE(WriteExr(capture->Resolve(image.file), *lit, ExrPixelType::kFloat).ok());
+    for (size_t i = 0; i < lit->data.size(); ++i) added += std::max(0.0f, lit->data[i] - photo->data[i]);
+  }
+  EXPECT_GT(added, 0.0) << "the relief object's concavities send no light at all";
+  const render::IndirectEvidence with = evidence_of(*capture);
+  std::printf("photographs with interreflection: scale %.6f, error reduction %.6f\n", with.scale,
+              with.error_reduction);
+  EXPECT_TRUE(with.shows);
+  // The photographs are the prediction itself (same table, same fit): float rounding only.
+  EXPECT_NEAR(with.scale, 1.0, 1e-6);
+  EXPECT_NEAR(with.error_reduction, 1.0, 1e-6);
+
+  ASSERT_TRUE(render::RenderCapture(*capture, gt, dir / "auto_indirect", auto_options).ok());
+  report = Json::parse(ReadTextFile(dir / "auto_indirect/render_report.json").value());
+  EXPECT_EQ(report["indirect"]["used"], true);
+  EXPECT_EQ(report["indirect"]["bounces"], 2);
+  for (const CaptureImage& image : capture->images) {
+    if (image.split != Split::kHoldout) continue;
+    auto photo = ReadExrRgb(capture->Resolve(image.file));
+    auto rendered = ReadExrRgb(dir / "auto_indirect" / render::RenderPathFor(image.file));
+    ASSERT_TRUE(photo.ok() && rendered.ok());
+    ASSERT_EQ(photo->data, rendered->data) << image.file;
+  }
+  // Bad settings.
+  render::CaptureRenderOptions bad;
+  bad.indirect_bounces = 0;
+  EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
+  bad.indirect_bounces = render::kMaxIndirectBounces;
+  bad.indirect_rays = render::kMaxIndirectRays + 1;
+  EXPECT_EQ(bad.Validate().code(), StatusCode::kInvalidArgument);
+  EXPECT_FALSE(render::ParseIndirectMode("sometimes", "--indirect").ok());
+}
+
 TEST(RenderCapture, FileLayoutKeys) {
   EXPECT_EQ(render::ImageKey("images/0003.exr"), "0003");
   EXPECT_EQ(render::ImageKey("raw/a.png"), "raw/a");
