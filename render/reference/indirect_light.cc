@@ -125,7 +125,7 @@ std::vector<Vec3f> IndirectLight::TexelRadiance(const RayScene& scene, const Tex
       if (point_light) {
         const Vec3f to_light = light_in_object - atlas.position[t];
         dist = to_light.norm();
-        if (!(dist > 0)) continue;  // the light inside the surface: nothing defined
+        if (!(dist > 0)) continue;  // the light exactly at the texel: no direction to it
         wi = to_light / dist;
         irradiance_per_cos /= dist * dist;
       }
