@@ -169,7 +169,6 @@ void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Came
                 pixels->channels == 3);
   REFLCAP_CHECK(radiance.size() == atlas.TexelCount());
   const Rigid3 object_from_cam = (camera.cam_from_world * world_from_object).Inverse();
-  const TriangleMesh& mesh = scene.mesh();
   const int n = std::max(1, supersampling);
   const float weight = float(exposure_s) / float(n * n);
   auto trace = [&](double px, double py) -> Vec3f {
@@ -177,9 +176,7 @@ void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Came
     camera.PixelRay({px, py}, &o, &d);
     const Vec3f origin = (object_from_cam * o).cast<float>();
     const Vec3f dir = (object_from_cam.rotation * d).normalized().cast<float>();
-    const RayHit hit = scene.Intersect(origin, dir, 0, kInfinity);
-    if (!hit.hit || mesh.GeometricNormal(hit.triangle).dot(dir) >= 0) return Vec3f::Zero();
-    const int32_t t = TexelOfRayHit(scene, atlas, hit, dir);
+    const int32_t t = TexelOfRayHit(scene, atlas, scene.Intersect(origin, dir, 0, kInfinity), dir);
     return t < 0 ? Vec3f::Zero() : radiance[size_t(t)];
   };
   ParallelFor(0, camera.height, 4, [&](int64_t y0, int64_t y1, int) {

@@ -66,9 +66,22 @@ const char* IndirectModeName(IndirectMode mode) {
   }
 }
 
-StatusOr<IndirectEvidence> MeasureIndirectEvidence(const FittedCapture& fitted,
-                                                   const IndirectLight& indirect, int bounces,
-                                                   bool cast_shadows) {
+void AddIndirectLight(const FittedCapture& fitted, const IndirectLight& indirect, size_t index,
+                      int bounces, bool cast_shadows, int supersampling, Image* pixels) {
+  const Capture& capture = *fitted.capture;
+  const CaptureImage& image = capture.images[index];
+  const Rigid3 world_from_object = capture.WorldFromObject(image);
+  const std::vector<Vec3f> radiance =
+      indirect.TexelRadiance(*fitted.scene, fitted.atlas, fitted.maps,
+                             capture.lights[image.light], world_from_object.Inverse(), bounces,
+                             cast_shadows);
+  AddTexelRadiance(*fitted.scene, fitted.atlas, capture.cameras[image.camera], world_from_object,
+                   image.exposure_s, supersampling, radiance, pixels);
+}
+
+IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
+                                         const IndirectLight& indirect, int bounces,
+                                         bool cast_shadows) {
   const Capture& capture = *fitted.capture;
   REFLCAP_CHECK(!fitted.normal_map && fitted.scene != nullptr);
   std::vector<size_t> pool;
@@ -104,14 +117,8 @@ StatusOr<IndirectEvidence> MeasureIndirectEvidence(const FittedCapture& fitted,
     }
     const RenderResult& lit = *rendered;
     const Image& photo = *read;
-    const Rigid3 world_from_object = capture.WorldFromObject(image);
-    const std::vector<Vec3f> radiance =
-        indirect.TexelRadiance(*fitted.scene, fitted.atlas, fitted.maps,
-                               capture.lights[image.light], world_from_object.Inverse(), bounces,
-                               cast_shadows);
     Image predicted(camera.width, camera.height, 3, 0.0f);
-    AddTexelRadiance(*fitted.scene, fitted.atlas, camera, world_from_object, image.exposure_s, 1,
-                     radiance, &predicted);
+    AddIndirectLight(fitted, indirect, index, bounces, cast_shadows, 1, &predicted);
     // A pixel whose 3x3 neighbourhood is object without direct light: away from silhouettes and
     // shadow edges, where the photograph's pixel filter mixes in lit surface or background.
     auto unlit = [&](int x, int y) {
@@ -309,6 +316,58 @@ Status CaptureRenderOptions::Validate() const {
   return OkStatus();
 }
 
+// The gather table when the render adds interreflection (null otherwise), and what decided it for
+// render_report.json `indirect`.
+StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCapture& fitted,
+                                                              const CaptureRenderOptions& options,
+                                                              Json* report) {
+  *report = {{"mode", IndirectModeName(options.indirect)}, {"used", false}};
+  if (fitted.normal_map) {
+    (*report)["why_not"] = "a normal-map capture has no surface to bounce light from";
+    return std::unique_ptr<IndirectLight>();
+  }
+  if (options.indirect == IndirectMode::kOff) return std::unique_ptr<IndirectLight>();
+  if (options.indirect == IndirectMode::kAuto) {
+    const auto start = std::chrono::steady_clock::now();
+    REFLCAP_ASSIGN_OR_RETURN(
+        IndirectLight coarse,
+        IndirectLight::Build(*fitted.scene, fitted.atlas,
+                             std::min(options.indirect_rays, kIndirectEvidenceRays)));
+    const IndirectEvidence evidence =
+        MeasureIndirectEvidence(fitted, coarse, options.indirect_bounces, options.cast_shadows);
+    (*report)["evidence"] = {{"images", evidence.images},
+                             {"pixels", evidence.pixels},
+                             {"skipped_images", evidence.skipped},
+                             {"scale", evidence.scale},
+                             {"error_reduction", evidence.error_reduction},
+                             {"min_pixels", kMinIndirectEvidencePixels},
+                             {"min_error_reduction", kMinIndirectErrorReduction},
+                             {"rays_per_texel", coarse.rays()},
+                             {"seconds", SecondsSince(start)}};
+    REFLCAP_LOG(kInfo) << "render: interreflection " << (evidence.shows ? "on" : "off")
+                       << " (auto: where no direct light reaches, it changes the train "
+                          "photographs' squared error by "
+                       << std::lround(-100 * evidence.error_reduction) << " %)";
+    if (!evidence.shows) {
+      (*report)["why_not"] = "the train photographs show no interreflection";
+      return std::unique_ptr<IndirectLight>();
+    }
+  }
+  const auto start = std::chrono::steady_clock::now();
+  REFLCAP_ASSIGN_OR_RETURN(IndirectLight table,
+                           IndirectLight::Build(*fitted.scene, fitted.atlas,
+                                                options.indirect_rays));
+  (*report)["table_s"] = SecondsSince(start);
+  (*report)["used"] = true;
+  (*report)["bounces"] = options.indirect_bounces;
+  (*report)["rays_per_texel"] = options.indirect_rays;
+  if (options.indirect == IndirectMode::kOn) {
+    REFLCAP_LOG(kInfo) << "render: interreflection on (" << options.indirect_bounces
+                       << " bounces, " << options.indirect_rays << " rays per texel)";
+  }
+  return std::make_unique<IndirectLight>(std::move(table));
+}
+
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
                                              const fs::path& out_dir,
                                              const CaptureRenderOptions& options,
@@ -350,56 +409,9 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                                              options.cast_shadows && options.height_shadows));
   summary.texels = fitted->atlas.TexelCount();
   // Interreflection: the gather table, and (auto) whether the photographs show it.
-  std::unique_ptr<IndirectLight> indirect;
-  Json indirect_report = {{"mode", IndirectModeName(options.indirect)}, {"used", false}};
-  if (fitted->normal_map) {
-    indirect_report["why_not"] = "a normal-map capture has no surface to bounce light from";
-  } else if (options.indirect != IndirectMode::kOff) {
-    bool use = options.indirect == IndirectMode::kOn;
-    if (options.indirect == IndirectMode::kAuto) {
-      const auto t1 = std::chrono::steady_clock::now();
-      REFLCAP_ASSIGN_OR_RETURN(
-          IndirectLight coarse,
-          IndirectLight::Build(*fitted->scene, fitted->atlas,
-                               std::min(options.indirect_rays, kIndirectEvidenceRays)));
-      REFLCAP_ASSIGN_OR_RETURN(IndirectEvidence evidence,
-                               MeasureIndirectEvidence(*fitted, coarse, options.indirect_bounces,
-                                                       options.cast_shadows));
-      indirect_report["evidence"] = {{"images", evidence.images},
-                                     {"pixels", evidence.pixels},
-                                     {"skipped_images", evidence.skipped},
-                                     {"scale", evidence.scale},
-                                     {"error_reduction", evidence.error_reduction},
-                                     {"min_pixels", kMinIndirectEvidencePixels},
-                                     {"min_error_reduction", kMinIndirectErrorReduction},
-                                     {"rays_per_texel", coarse.rays()},
-                                     {"seconds", SecondsSince(t1)}};
-      use = evidence.shows;
-      if (!use) indirect_report["why_not"] = "the train photographs show no interreflection";
-    }
-    if (use) {
-      const auto t0 = std::chrono::steady_clock::now();
-      REFLCAP_ASSIGN_OR_RETURN(IndirectLight table,
-                               IndirectLight::Build(*fitted->scene, fitted->atlas,
-                                                    options.indirect_rays));
-      indirect_report["table_s"] = SecondsSince(t0);
-      indirect = std::make_unique<IndirectLight>(std::move(table));
-      indirect_report["used"] = true;
-      indirect_report["bounces"] = options.indirect_bounces;
-      indirect_report["rays_per_texel"] = options.indirect_rays;
-    }
-    REFLCAP_LOG(kInfo) << "render: interreflection " << (use ? "on" : "off") << " ("
-                       << IndirectModeName(options.indirect)
-                       << (indirect_report.contains("evidence")
-                               ? StrCat(": where no direct light reaches, it changes the "
-                                        "train photographs' squared error by ",
-                                        std::lround(-100 * indirect_report["evidence"]
-                                                               ["error_reduction"]
-                                                                   .get<double>()),
-                                        " %")
-                               : std::string())
-                       << ")";
-  }
+  Json indirect_report;
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<IndirectLight> indirect,
+                           PrepareIndirectLight(*fitted, options, &indirect_report));
   summary.num_lobes = fitted->maps.num_lobes;
   if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
   // Every output folder exists before the writers start (they run concurrently).
@@ -450,19 +462,13 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         std::lock_guard<std::mutex> lock(mutex);
         if (!write_error.ok()) return write_error;
       }
+      if (indirect != nullptr) {  // part of the image's render time
+        AddIndirectLight(*fitted, *indirect, selected[k], options.indirect_bounces,
+                         options.cast_shadows, options.supersampling, &r.pixels);
+      }
       const auto now = std::chrono::steady_clock::now();
       timings[k].render_s = std::chrono::duration<double>(now - last_delivery).count();
       last_delivery = now;
-      if (indirect != nullptr) {
-        const CaptureImage& image = capture.images[selected[k]];
-        const Rigid3 world_from_object = capture.WorldFromObject(image);
-        const std::vector<Vec3f> radiance = indirect->TexelRadiance(
-            *fitted->scene, fitted->atlas, fitted->maps, capture.lights[image.light],
-            world_from_object.Inverse(), options.indirect_bounces, options.cast_shadows);
-        AddTexelRadiance(*fitted->scene, fitted->atlas, capture.cameras[image.camera],
-                         world_from_object, image.exposure_s, options.supersampling, radiance,
-                         &r.pixels);
-      }
       auto result = std::make_shared<RenderResult>(std::move(r));
       writers.Submit([&, k, result] {
         if (stop) return;

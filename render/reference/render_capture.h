@@ -122,9 +122,13 @@ struct IndirectEvidence {
   double error_reduction = 0;
   bool shows = false;
 };
-StatusOr<IndirectEvidence> MeasureIndirectEvidence(const FittedCapture& fitted,
-                                                   const IndirectLight& indirect, int bounces,
-                                                   bool cast_shadows);
+IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
+                                         const IndirectLight& indirect, int bounces,
+                                         bool cast_shadows);
+// Adds the interreflection of capture image `index` (IndirectLight::TexelRadiance for its light
+// and pose, then AddTexelRadiance with its camera and exposure) to `pixels`.
+void AddIndirectLight(const FittedCapture& fitted, const IndirectLight& indirect, size_t index,
+                      int bounces, bool cast_shadows, int supersampling, Image* pixels);
 
 struct CaptureRenderSummary {
   size_t images = 0;
