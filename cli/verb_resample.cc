@@ -63,6 +63,12 @@ int RunResample(int argc, char** argv) {
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: do not reject samples in cast shadow on the height field "
                "integrated from the normal map (default: rejected as shadowed)");
+  std::string sample_point = "pixel";
+  args.AddString("sample-point", &sample_point, "pixel|texel",
+                 "mesh captures: measure each texel at the pixel whose surface point is nearest "
+                 "its centre, with that point's normal and directions (pixel, default), or "
+                 "interpolate the four pixels around its projection at the texel centre's "
+                 "geometry (texel: less noise, blurs highlights)");
   int chunk_texels = int(options.chunk_texels);
   args.AddInt("chunk-texels", &chunk_texels,
               StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,
@@ -100,7 +106,9 @@ int RunResample(int argc, char** argv) {
   if (!std::isnan(read_sigma)) options.read_sigma = read_sigma;
   auto parsed_split = resample::ParseSplit(split);
   auto parsed_backend = resample::ParseBackend(backend);
-  for (const Status& s : {parsed_split.status(), parsed_backend.status()}) {
+  auto parsed_point = resample::ParseSamplePoint(sample_point);
+  for (const Status& s :
+       {parsed_split.status(), parsed_backend.status(), parsed_point.status()}) {
     if (!s.ok()) {
       std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
       return kExitUsage;
@@ -108,6 +116,7 @@ int RunResample(int argc, char** argv) {
   }
   options.split = *parsed_split;
   options.backend = *parsed_backend;
+  options.sample_point = *parsed_point;
   options.height_shadows = !no_height_shadows;
   if (chunk_texels < 1) {
     std::fprintf(stderr, "reflcap resample: --chunk-texels must be >= 1\n");

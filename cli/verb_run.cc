@@ -171,6 +171,10 @@ int RunRun(int argc, char** argv) {
   args.AddFlag("variance-weights", &options.resample.use_variance,
                "resample: weight photographs that have images[].variance by it (default: the "
                "noise model)");
+  std::string sample_point = "pixel";
+  args.AddString("sample-point", &sample_point, "pixel|texel",
+                 "resample: measure each texel at its nearest pixel's surface point (pixel, "
+                 "default) or interpolate pixels at the texel centre (texel)");
   bool no_height_shadows = false;
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: no cast shadows from the height field integrated from the "
@@ -202,6 +206,14 @@ int RunRun(int argc, char** argv) {
     return kExitUsage;
   }
   options.resample.height_shadows = !no_height_shadows;
+  {
+    auto point = resample::ParseSamplePoint(sample_point);
+    if (!point.ok()) {
+      std::fprintf(stderr, "reflcap run: %s\n", point.status().message().c_str());
+      return kExitUsage;
+    }
+    options.resample.sample_point = *point;
+  }
   {
     auto mode = render::ParseIndirectMode(indirect, "--indirect");
     if (!mode.ok()) {

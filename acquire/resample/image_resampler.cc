@@ -78,6 +78,16 @@ constexpr double kMaxPixelCoordinate = 1e8;
 
 }  // namespace
 
+const char* SamplePointName(SamplePoint point) {
+  return point == SamplePoint::kTexel ? "texel" : "pixel";
+}
+
+StatusOr<SamplePoint> ParseSamplePoint(const std::string& name) {
+  if (name == "pixel") return SamplePoint::kPixel;
+  if (name == "texel") return SamplePoint::kTexel;
+  return InvalidArgumentError("--sample-point: \"", name, "\" is not pixel or texel");
+}
+
 const char* OutcomeName(Outcome outcome) {
   switch (outcome) {
     case Outcome::kKept: return "kept";
@@ -148,6 +158,8 @@ struct ImageResampler::Frame {
   // values, published with release/acquire so a reader sees depth whenever it sees kMapDone.
   std::unique_ptr<std::atomic<uint8_t>[]> map_state;  // kMapDone | kMapHit | kMapLit
   std::unique_ptr<std::atomic<float>[]> map_depth;    // distance along the unit pixel ray
+  // SamplePoint::kPixel: the hit's unit shading normal (x, y, z per pixel), stored with depth.
+  std::unique_ptr<std::atomic<float>[]> map_normal;
 
   // The camera ray through pixel (x, y), object frame; dir unit.
   void PixelRay(int x, int y, Vec3f* origin, Vec3f* dir) const {
@@ -300,6 +312,9 @@ Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageO
     const size_t pixel_count = size_t(camera.width) * camera.height;
     f.map_state.reset(new std::atomic<uint8_t>[pixel_count]());
     f.map_depth.reset(new std::atomic<float>[pixel_count]());
+    if (sample_point_ == SamplePoint::kPixel) {
+      f.map_normal.reset(new std::atomic<float>[3 * pixel_count]());
+    }
   }
 
   // ---- Texels -------------------------------------------------------------------------------
@@ -547,6 +562,10 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const
     const double tan_v = std::sqrt(std::max(0.0, 1 - cos_v * cos_v)) / cos_v;
     const float tolerance = float(kEdgeDepthSlack * footprint * (1 + std::sqrt(2.0) * tan_v));
     Outcome outcome = Outcome::kKept;
+    // SamplePoint::kPixel: the tap whose hit lies nearest the texel centre (ties: the first).
+    int nearest = -1;
+    float nearest_d2 = kInfinity;
+    Vec3f nearest_hit = Vec3f::Zero(), nearest_dir = Vec3f::Zero();
     for (int k = 0; k < 4 && outcome == Outcome::kKept; ++k) {
       if (taps.w[k] == 0) continue;
       const size_t m = size_t(taps.y[k]) * camera.width + taps.x[k];
@@ -565,19 +584,56 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const
         break;
       }
       if (!(state & kMapLit)) outcome = Outcome::kEdgeShadow;
+      const Vec3f hit = origin + depth * dir;
+      const float d2 = (hit - p).squaredNorm();
+      if (d2 < nearest_d2) {
+        nearest = k;
+        nearest_d2 = d2;
+        nearest_hit = hit;
+        nearest_dir = dir;
+      }
     }
     if (outcome != Outcome::kKept) {
       set(c.texel, outcome);
       continue;
     }
-    Vec3f wi_local, wo_local;
-    ToTangentFrame(atlas.tangent[c.texel], atlas.shading_normal[c.texel], c.wi, c.v, &wi_local,
-                   &wo_local);
     TexelSample s;
     s.texel = c.texel;
-    outcome = MakeSample(pixels, variance, taps, 4, noise_, f.saturation, f.exposure,
-                         f.intensity * c.inv_d2, c.cos_i, wi_local, wo_local, image_index,
-                         &s.sample);
+    Vec3f wi_local, wo_local;
+    if (sample_point_ == SamplePoint::kTexel) {
+      ToTangentFrame(atlas.tangent[c.texel], atlas.shading_normal[c.texel], c.wi, c.v, &wi_local,
+                     &wo_local);
+      outcome = MakeSample(pixels, variance, taps, 4, noise_, f.saturation, f.exposure,
+                           f.intensity * c.inv_d2, c.cos_i, wi_local, wo_local, image_index,
+                           &s.sample);
+    } else {
+      REFLCAP_DCHECK(nearest >= 0);
+      const size_t m = size_t(taps.y[nearest]) * camera.width + taps.x[nearest];
+      const Vec3f n_hit(f.map_normal[3 * m].load(std::memory_order_relaxed),
+                        f.map_normal[3 * m + 1].load(std::memory_order_relaxed),
+                        f.map_normal[3 * m + 2].load(std::memory_order_relaxed));
+      Vec3f wi;
+      float dist;
+      f.ToLight(nearest_hit, &wi, &dist);
+      const Vec3f wo = -nearest_dir;
+      const float cos_i = n_hit.dot(wi);
+      // The hit is within a pixel of the texel centre, which passed both grazing tests; its own
+      // normal may still tip past min_cos: a rim or the terminator inside the footprint.
+      if (!(n_hit.dot(wo) > min_cos)) {
+        set(c.texel, Outcome::kEdgeSurface);
+        continue;
+      }
+      if (!(cos_i > min_cos)) {
+        set(c.texel, Outcome::kEdgeShadow);
+        continue;
+      }
+      ToTangentFrame(atlas.tangent[c.texel], n_hit, wi, wo, &wi_local, &wo_local);
+      Taps one = taps;
+      for (int k = 0; k < 4; ++k) one.w[k] = k == nearest ? 1.0f : 0.0f;
+      outcome = MakeSample(pixels, variance, one, 4, noise_, f.saturation, f.exposure,
+                           f.intensity * (f.point_light ? 1.0f / (dist * dist) : 1.0f), cos_i,
+                           wi_local, wo_local, image_index, &s.sample);
+    }
     set(c.texel, outcome);
     if (outcome == Outcome::kKept) kept->push_back(s);
   }
@@ -607,7 +663,9 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
     scene_->Intersect16(valid, origin, dir, tnear, tfar, &hits);
     rays[2] += n;
     std::array<uint8_t, 16> state{};
+    std::array<Vec3f, 16> hit_normal;
     for (size_t i = 0; i < 16; ++i) {
+      hit_normal[i] = Vec3f::Zero();
       lit_valid[i] = false;
       lorigin[i] = ldir[i] = Vec3f::UnitZ();
       ltfar[i] = 0;
@@ -621,6 +679,7 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
       const auto& cn = mesh.corner_normals[tri];
       const float b1 = hits[i].b1, b2 = hits[i].b2;
       const Vec3f n_s = ((1 - b1 - b2) * cn[0] + b1 * cn[1] + b2 * cn[2]).normalized();
+      hit_normal[i] = n_s;
       const Vec3f& n_g = triangle_normals_[tri];
       Vec3f wi;
       float dist;
@@ -643,6 +702,9 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
       if (lit_valid[i] && !occluded[i]) state[i] |= kMapLit;
       const uint32_t m = pixels[base + i];
       f.map_depth[m].store(hits[i].hit ? hits[i].t : 0.0f, std::memory_order_relaxed);
+      if (f.map_normal != nullptr) {
+        for (int k = 0; k < 3; ++k) f.map_normal[3 * m + k].store(hit_normal[i][k], std::memory_order_relaxed);
+      }
       f.map_state[m].store(state[i], std::memory_order_release);
     }
   }

@@ -101,6 +101,15 @@ void MaskAgreement::Add(const std::vector<Vec3f>& positions, const std::vector<u
       const BrdfSample& a = embree_kept[i].sample;
       const BrdfSample& b = vulkan_kept[j].sample;
       ++kept_both;
+      double wo_diff = 0;
+      for (int c = 0; c < 3; ++c) wo_diff = std::max(wo_diff, double(std::abs(a.wo[c] - b.wo[c])));
+      const double pixel_angle = map.pinhole ? 1.0 / std::max(map.fx, map.fy) : 0.0;
+      if (map.pinhole && wo_diff > kSamePixelFraction * pixel_angle) {
+        ++other_pixel;
+        ++i;
+        ++j;
+        continue;
+      }
       for (int c = 0; c < 3; ++c) {
         max_value_rel_diff = std::max(max_value_rel_diff, RelDiff(a.value[c], b.value[c]));
         max_weight_rel_diff = std::max(max_weight_rel_diff, RelDiff(a.weight[c], b.weight[c]));

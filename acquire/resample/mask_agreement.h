@@ -34,6 +34,12 @@ constexpr int kNearEdgePixels = 2;
 // pixel footprints. The edge test accepts surfaces up to 81.4° from the view (min_cos 0.15),
 // whose depth changes by tan 81.4° = 6.6 footprints per pixel; anything steeper is an edge.
 constexpr double kDepthJumpFootprints = 8;
+// Two samples of one texel and photograph measured through the same pixel have view directions
+// within rounding of each other (the rasteriser's sub-pixel snapping: ~0.04 of a pixel's angle
+// measured on lavapipe); neighbouring pixels' rays lie one pixel's angle (1 / focal length in
+// pixels) apart: a quarter of it tells them apart. Orthographic views share one direction: there
+// the test cannot tell, and a different pixel's sample counts in the maxima.
+constexpr double kSamePixelFraction = 0.25;
 
 // What the camera map of one photograph holds (copied back from the GPU), and where an
 // object-frame point lands in it.
@@ -69,6 +75,11 @@ struct MaskAgreement {
   double max_value_rel_diff = 0;
   double max_weight_rel_diff = 0;
   double max_direction_diff = 0;  // largest |wi - wi'| or |wo - wo'| component
+  // SamplePoint::kPixel: samples both keep whose view directions differ by more than
+  // kSamePixelFraction of a pixel's angle (pinhole maps) — the two paths chose different taps, because two taps' hits lay at
+  // almost the same distance from the texel centre (float rounding decides). Their values are
+  // different pixels', so they are counted here and left out of the three maxima above.
+  uint64_t other_pixel = 0;
   // confusion[embree * kOutcomeCount + vulkan]: pairs per (Embree outcome, Vulkan outcome).
   std::array<uint64_t, 121> confusion{};
 

@@ -144,6 +144,7 @@ Json CheckpointIdentity(const Capture& capture, const ResampleOptions& options,
               {"noise", {noise.model.photon_sigma_at_1, noise.model.read_sigma, noise.saturation}},
               {"variance_weights", options.use_variance},
               {"height_shadows", options.height_shadows},
+              {"sample_point", SamplePointName(options.sample_point)},
               {"images", images.size()},
               {"images_crc32", Crc32(images.data(), images.size() * sizeof(uint32_t))}};
 }
@@ -382,6 +383,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                            ImageResampler::Create(capture, atlas, scene.get(), noise.model,
                                                   options.min_cos, options.threads));
   REFLCAP_RETURN_IF_ERROR(resampler->SetHeightField(height_field.get()));
+  resampler->SetSamplePoint(options.sample_point);
   // The Vulkan masks replace the Embree path for mesh captures (a normal-map capture casts no
   // ray: it runs the CPU path under either backend).
   std::unique_ptr<VulkanMasks> masks;
@@ -389,6 +391,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   if (options.backend == Backend::kVulkan && !normal_map) {
     VulkanMaskOptions mo;
     mo.device = options.device;
+    mo.sample_point = options.sample_point;
     REFLCAP_ASSIGN_OR_RETURN(masks, VulkanMasks::Create(capture, atlas, *mesh_data,
                                                         scene->SurfaceOffset(), noise.model,
                                                         options.min_cos, mo));
@@ -632,6 +635,8 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
       {"device", device},
       {"split", info.split},
       {"geometry", info.geometry},
+      {"sample_point", normal_map ? std::string("own pixel (a normal map's texel is one)")
+                                  : std::string(SamplePointName(options.sample_point))},
       {"visibility", normal_map && height_field != nullptr
                          ? "normal map: every texel is visible (an orthographic view sees each of "
                            "its pixels; no occlusion or footprint test); cast shadow from the "
@@ -740,6 +745,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
         {"max_value_relative_difference", agreement.max_value_rel_diff},
         {"max_weight_relative_difference", agreement.max_weight_rel_diff},
         {"max_direction_difference", agreement.max_direction_diff},
+        {"kept_by_both_from_another_pixel", agreement.other_pixel},
         {"cross_check_s", cross_check_s},
         {"definition",
          StrCat("a (texel, image) pair agrees when Embree's rays and the Vulkan masks give it the "

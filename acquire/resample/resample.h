@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "acquire/resample/image_resampler.h"
 #include "engine/capture/capture.h"
 #include "engine/core/shard.h"
 #include "engine/core/status.h"
@@ -109,6 +110,10 @@ struct ResampleOptions {
   // (every texel counts as unshadowed). Needs an orthographic camera; with a pinhole one the test
   // is skipped with a warning and the report says why. Mesh captures ignore it.
   bool height_shadows = true;
+  // Mesh captures: where each texel's sample is measured (image_resampler.h SamplePoint): the
+  // pixel whose hit is nearest the texel, with that hit's geometry (kPixel, `--sample-point
+  // pixel`, the default), or the bilinear interpolation at the texel centre (kTexel).
+  SamplePoint sample_point = SamplePoint::kPixel;
   uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
   // Checkpoints (`resample --resume`). When not empty, the reorder's spill files live in this
   // folder (the CLI uses OUT.checkpoint beside OUT) and, every checkpoint_seconds of work (0:

@@ -58,7 +58,8 @@ static_assert(sizeof(sh::MaskDrawPush) == sizeof(sh::LightMapPush),
 // Descriptor bindings (shaders/resample/masks_common.glsl).
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindLightMap = 3,
                    kBindCameraMap = 4, kBindTexels = 5, kBindRays = 6, kBindPixels = 7,
-                   kBindOutcomes = 8, kBindSamples = 9, kBindVariance = 10;
+                   kBindOutcomes = 8, kBindSamples = 9, kBindVariance = 10,
+                   kBindCameraNormal = 11;
 // MaskParams::relative_sigma_floor.y: 1 when binding 10 holds the photograph's variance image
 // (images[].variance) and masks.comp takes each sample's noise from it (z, w: kDarkSigmas and
 // kInvalidSigmas), 0 when the noise model (MaskParams::noise) applies.
@@ -176,7 +177,8 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                                                            {kBindPixels, kSsbo, kComp},
                                                            {kBindOutcomes, kSsbo, kComp},
                                                            {kBindSamples, kSsbo, kComp},
-                                                           {kBindVariance, kSsbo, kComp}}));
+                                                           {kBindVariance, kSsbo, kComp},
+                                                           {kBindCameraNormal, kTex, kComp}}));
   REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
   REFLCAP_ASSIGN_OR_RETURN(
       texel_pipeline,
@@ -313,7 +315,9 @@ Status VulkanMasks::Impl::EnsureCameraTarget(uint32_t w, uint32_t h) {
   }
   camera_target.reset();
   REFLCAP_ASSIGN_OR_RETURN(camera_target,
-                           MakePassTarget(*ctx, w, h, 1, {VK_FORMAT_R32G32B32A32_SFLOAT},
+                           MakePassTarget(*ctx, w, h, 1,
+                                          {VK_FORMAT_R32G32B32A32_SFLOAT,
+                                           VK_FORMAT_R32G32B32A32_SFLOAT},
                                           VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, false));
   if (camera_pipeline.handle() == VK_NULL_HANDLE) {
     gpu::GraphicsPipelineOptions o;
@@ -458,7 +462,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   p.relative_sigma_floor = {float(kRelativeSigmaFloor), variance != nullptr ? kUseVarianceImage : 0,
                             float(kDarkSigmas), float(kInvalidSigmas)};
   p.flags = (pinhole ? sh::kMaskFlagPinhole : 0u) | (point_light ? sh::kMaskFlagPointLight : 0u) |
-            (pinhole && camera.HasDistortion() ? sh::kMaskFlagDistortion : 0u);
+            (pinhole && camera.HasDistortion() ? sh::kMaskFlagDistortion : 0u) |
+            (m.options.sample_point == SamplePoint::kPixel ? sh::kMaskFlagPixelSample : 0u);
   p.width = uint32_t(w);
   p.height = uint32_t(h);
   p.map_width = uint32_t(pinhole ? grid->width : w);
@@ -525,6 +530,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
     set.WriteImage(kBindLightMap, m.light_pass.depth().array_view(), m.sampler.handle(), kRead);
     set.WriteImage(kBindCameraMap, m.camera_target->colors[0]->array_view(), m.sampler.handle(),
                    kRead);
+    set.WriteImage(kBindCameraNormal, m.camera_target->colors[1]->array_view(),
+                   m.sampler.handle(), kRead);
     set.WriteBuffer(kBindTexels, *m.texels, first * sizeof(sh::MaskTexel),
                     count * sizeof(sh::MaskTexel));
     set.WriteBuffer(kBindRays, rays);

@@ -73,6 +73,8 @@ struct VulkanMaskOptions {
   // storage-buffer binding holds (2,097,152 on lavapipe's 128 MiB); else rounded down to a
   // multiple of 1024 (>= 1024). Tests set it small to exercise the chunked path.
   uint32_t max_chunk_texels = 0;
+  // Where each texel's sample is measured, as ImageResampler::SetSamplePoint (image_resampler.h).
+  SamplePoint sample_point = SamplePoint::kPixel;
 
   Status Validate() const;
 };

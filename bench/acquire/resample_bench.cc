@@ -60,7 +60,9 @@ constexpr double kMaxMedianError = 2e-3;
 // vulkan_masks_test.cc): the same outcome for this fraction of pairs, values within this relative
 // difference for the samples both keep.
 constexpr double kMinAgreement = 0.995;
-constexpr double kMaxValueDiff = 1e-4;
+// --sample-point pixel (the default): the GPU's hit normal comes from the rasteriser, ~0.01 px
+// from the CPU's exact hit; the test's tolerance is the 1e-3 radiometric floor.
+constexpr double kMaxValueDiff = 1e-3;
 
 // A temporary folder removed at exit.
 struct TempDir {

@@ -9,7 +9,9 @@
 //
 // Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[] (vertex stage), 2 = triangle normals,
 // 3 = light map. Push constants: MaskDrawPush {view = kMaskCameraView}.
-// Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, 0); the clear value 0 = background.
+// Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, 0); location 1 (RGBA32F) = (the
+// hit's unit shading normal, 0), what SamplePoint::kPixel measures a sample with; the clear
+// value 0 = background.
 #extension GL_GOOGLE_include_directive : require
 
 #define REFLCAP_MASK_TRIANGLES
@@ -21,6 +23,7 @@ layout(push_constant) uniform Push { MaskDrawPush push; };
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
 layout(location = 0) out vec4 out_map;
+layout(location = 1) out vec4 out_normal;
 
 void main() {
   vec3 p = in_position;
@@ -35,4 +38,5 @@ void main() {
   vec3 wi = ToLight(p, dist);
   bool lit = dot(n_s, wi) > 0.0 && dot(n_g, wi) > 0.0 && !LightShadowed(p, n_g);
   out_map = vec4(distance, lit ? 1.0 : 0.0, 1.0, 0.0);
+  out_normal = vec4(n_s, 0.0);
 }

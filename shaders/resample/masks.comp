@@ -7,7 +7,11 @@
 //   view grazing -> projection (four bilinear taps inside the image) -> camera map (occluded) ->
 //   light grazing -> light map (shadowed) -> footprint: every tap's camera-map texel is a hit
 //   within the edge depth tolerance of the texel, and lit -> pixel values (invalid, clipped,
-//   invalid below the noise, dark) -> the BRDF sample.
+//   invalid below the noise, dark) -> the BRDF sample. With kMaskFlagPixelSample
+//   (SamplePoint::kPixel) the sample is the tap whose hit lies nearest the texel centre, with the
+//   hit's position (its ray and camera-map distance), shading normal (the camera pass's second
+//   attachment), directions and light distance, as the CPU's; else the bilinear value at the
+//   texel centre's geometry.
 // Loops: at most 4 taps x 3 channels (twice with a variance image) per invocation, far below
 // lavapipe's 65,535-step cut.
 //
@@ -15,7 +19,7 @@
 // 6 = pixel rays (vec2 per pixel, pinhole cameras), 7 = photograph (float RGB, row-major),
 // 8 = outcome per texel (this chunk), 9 = MaskSample per texel (this chunk; written when kept),
 // 10 = the photograph's variance image (float RGB, row-major; read only when
-// params.relative_sigma_floor.y = 1, see "Noise" below).
+// params.relative_sigma_floor.y = 1, see "Noise" below), 11 = camera normal map.
 //
 // Noise: with the variance image, a sample's variance is MeasuredVariance (Σ w_k² var_k over the
 // bilinear taps) plus the relative floor, and its invalid / dark tests compare each channel with
@@ -259,6 +263,11 @@ void main() {
   // 6. Footprint: each tap's camera ray hits the texel's own, lit surface.
   float tolerance = params.tests.z * footprint * (1.0 + kSqrt2 * tan_v);
   uint outcome = kMaskKept;
+  // kMaskFlagPixelSample: the tap whose hit lies nearest the texel centre (ties: the first).
+  int nearest = -1;
+  float nearest_d2 = 0.0;
+  vec3 nearest_hit = vec3(0.0), nearest_dir = vec3(0.0);
+  ivec2 nearest_map = ivec2(0);
   for (int k = 0; k < 4 && outcome == kMaskKept; ++k) {
     if (w[k] == 0.0) continue;
     ivec2 t = MapTexelOfPixel(tap[k].x, tap[k].y);
@@ -274,10 +283,38 @@ void main() {
       break;
     }
     if (!(m.y > 0.5)) outcome = kMaskEdgeShadow;
+    vec3 hit = origin + m.x * dir;
+    vec3 to_hit = hit - p;
+    float d2 = dot(to_hit, to_hit);
+    if (nearest < 0 || d2 < nearest_d2) {
+      nearest = k;
+      nearest_d2 = d2;
+      nearest_hit = hit;
+      nearest_dir = dir;
+      nearest_map = t;
+    }
   }
   if (outcome != kMaskKept) {
     outcomes[local] = outcome;
     return;
+  }
+  if ((params.flags & kMaskFlagPixelSample) != 0u) {
+    // The sample is the nearest tap's pixel at its hit's geometry (the CPU's SamplePoint::kPixel).
+    n_s = texelFetch(camera_normal_map, ivec3(nearest_map, 0), 0).xyz;
+    v = -nearest_dir;
+    wi = ToLight(nearest_hit, dist);
+    cos_i = dot(n_s, wi);
+    // The hit's own normal may tip past min_cos: a rim or the terminator inside the footprint.
+    if (!(dot(n_s, v) > min_cos)) {
+      outcomes[local] = kMaskEdgeSurface;
+      return;
+    }
+    if (!(cos_i > min_cos)) {
+      outcomes[local] = kMaskEdgeShadow;
+      return;
+    }
+    inv_d2 = (params.flags & kMaskFlagPointLight) != 0u ? 1.0 / (dist * dist) : 1.0;
+    for (int k = 0; k < 4; ++k) w[k] = k == nearest ? 1.0 : 0.0;
   }
   // 7. Pixel values (MakeSample).
   for (int k = 0; k < 4; ++k) {

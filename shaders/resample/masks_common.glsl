@@ -36,6 +36,8 @@ layout(set = 0, binding = 3) uniform sampler2DArray light_map;
 #endif
 #ifdef REFLCAP_MASK_CAMERA_MAP
 layout(set = 0, binding = 4) uniform sampler2DArray camera_map;
+// The camera pass's second attachment: the hit's unit shading normal (xyz), 0 = background.
+layout(set = 0, binding = 11) uniform sampler2DArray camera_normal_map;
 #endif
 
 // rows (4x4, row-major) times (p, 1).

@@ -15,6 +15,8 @@ REFLCAP_SHARED_BEGIN
 REFLCAP_CONST(uint, kMaskFlagPinhole, 1u);     // pinhole camera (else orthographic)
 REFLCAP_CONST(uint, kMaskFlagPointLight, 2u);  // point light (else directional)
 REFLCAP_CONST(uint, kMaskFlagDistortion, 4u);  // the camera has lens distortion
+// SamplePoint::kPixel: the sample is the nearest tap's pixel with its hit's geometry.
+REFLCAP_CONST(uint, kMaskFlagPixelSample, 8u);
 // Most light-map views: a cube map's six faces.
 REFLCAP_CONST(uint, kMaskMaxLightViews, 6u);
 // MaskDrawPush::view of the camera pass (light views are 0 .. num_light_views - 1).

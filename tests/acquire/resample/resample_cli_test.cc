@@ -73,6 +73,17 @@ TEST(ResampleCli, WritesAStoreReportAndMaps) {
   const auto report = nlohmann::json::parse(ReadTextFile(out / "resample_report.json").value());
   EXPECT_GT(report["samples_kept"].get<int>(), 0);
   EXPECT_EQ(report["split"], "train");
+  EXPECT_EQ(report["sample_point"], "pixel");
+  // --sample-point texel is recorded, and measures the same pairs through other pixels.
+  const fs::path texel = dir / "texel";
+  r = RunCli("resample --quiet " + TinyCapture().string() + " --out " + texel.string() +
+                 " --sample-point texel",
+             dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto texel_report =
+      nlohmann::json::parse(ReadTextFile(texel / "resample_report.json").value());
+  EXPECT_EQ(texel_report["sample_point"], "texel");
+  EXPECT_GT(texel_report["samples_kept"].get<int>(), 0);
 }
 
 TEST(ResampleCli, MissingCaptureExitsTwoNamingIt) {
@@ -118,7 +129,8 @@ TEST(ResampleCli, BadOptionsAreUsageErrors) {
   const std::string base = "resample " + TinyCapture().string() + " --out " + (dir / "s").string();
   for (const std::string bad : {" --min-cos 1.5", " --min-cos -0.1", " --min-cos banana",
                                  " --split test", " --backend cuda", " --atlas-res -3",
-                                 " --read-sigma -2", " --frobnicate"}) {
+                                 " --read-sigma -2", " --frobnicate", " --sample-point centre",
+                                 " --sample-point"}) {
     CliResult r = RunCli(base + bad, dir);
     EXPECT_EQ(r.exit_code, 1) << bad << ": " << r.err;
     EXPECT_FALSE(r.err.empty()) << bad;
@@ -201,6 +213,11 @@ TEST(ResampleCli, ResumeAfterSigkillGivesTheUninterruptedStore) {
   r = RunCli("resample " + capture + " --out " + out.string() + common + " --min-cos 0.2 --resume", dir);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("identity.min_cos"), std::string::npos) << r.err;
+  r = RunCli("resample " + capture + " --out " + out.string() + common +
+                 " --sample-point texel --resume",
+             dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("identity.sample_point"), std::string::npos) << r.err;
 
   // A corrupt checkpoint is named, and nothing is written.
   {

@@ -57,6 +57,8 @@ TEST(ResampleVariance, PlaneWeightsFollowTheInterpolatedVarianceWhichDecidesDark
   noise.read_sigma = 0.01;
   auto resampler = ImageResampler::Create(capture, *atlas, scene->get(), noise, kDefaultMinCos);
   ASSERT_TRUE(resampler.ok()) << resampler.status().ToString();
+  // The interpolation's variance Σ w_k² var_k is what this test checks: bilinear taps.
+  (*resampler)->SetSamplePoint(SamplePoint::kTexel);
 
   // Pixels (0.2, 0.3, 0.4) with a variance that changes from pixel to pixel and channel to
   // channel (so Σ w_k² var_k is checked tap by tap), and three patches where the variance image
@@ -283,6 +285,8 @@ TEST(ResampleVariance, RegionWithAHundredTimesTheVarianceGetsAHundredthOfTheWeig
   NoiseModel noise;  // unused by these photographs: every one has a variance image
   auto resampler = ImageResampler::Create(region, atlas, scene.get(), noise, kDefaultMinCos);
   ASSERT_TRUE(resampler.ok()) << resampler.status().ToString();
+  // The expected ratios below follow the bilinear taps' Σ w_k²: SamplePoint::kTexel.
+  (*resampler)->SetSamplePoint(SamplePoint::kTexel);
   std::vector<double> high_ratios;
   size_t low = 0, high_checked = 0;
   for (uint32_t i = 0; i < 8; ++i) {

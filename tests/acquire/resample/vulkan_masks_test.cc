@@ -47,13 +47,19 @@ constexpr double kMinNearEdgeFraction = 0.7;
 // The comparison has teeth only if the relief shadows itself: cast-shadowed pairs must be at
 // least this fraction of the kept samples (measured 2.4 %).
 constexpr double kMinShadowedPerKept = 0.02;
-// Samples both paths keep: value and weight in float on the GPU against float(double) on the
-// CPU, with bilinear weights from a float projection (~1e-5 px apart): a few 1e-5 relative where
-// neighbouring pixels differ, well below the 1e-3 radiometric floor (kRelativeSigmaFloor).
-constexpr double kValueTolerance = 1e-4;
-constexpr double kWeightTolerance = 1e-3;
-// wi, wo: unit vectors from the same float inputs, ~1e-7 apart.
-constexpr double kDirectionTolerance = 1e-5;
+// Samples both paths keep (SamplePoint::kPixel, the default: the same pixel's value at its hit's
+// geometry): the GPU's hit normal and distance come from the rasteriser, which snaps vertices to
+// sub-pixel steps (1/256 px on lavapipe), so they are those of a point up to ~0.01 px from the
+// CPU's exact hit: directions measured 5e-5 apart (1e-4 on the seed-11 capture), values and
+// weights, through cos θi and the light distance, 1e-4 relative. The tolerance is the 1e-3
+// radiometric floor (kRelativeSigmaFloor) for values, twice that for weights (the square of the
+// scale), and 2e-4 for directions.
+constexpr double kValueTolerance = 1e-3;
+constexpr double kWeightTolerance = 2e-3;
+constexpr double kDirectionTolerance = 2e-4;
+// Samples both keep from different pixels (two taps' hits at the same distance from the texel
+// centre within rounding): measured 0 of 14,881 here, 21 of 765,605 on the seed-11 capture.
+constexpr double kMaxOtherPixelShare = 1e-3;
 
 const std::string& NoVulkanReason() {
   static const std::string reason = [] {
@@ -203,6 +209,7 @@ TEST_F(VulkanMasksTest, SamplesBothKeepHaveTheCpuValues) {
   EXPECT_LE(g.max_value_rel_diff, kValueTolerance);
   EXPECT_LE(g.max_weight_rel_diff, kWeightTolerance);
   EXPECT_LE(g.max_direction_diff, kDirectionTolerance);
+  EXPECT_LE(double(g.other_pixel), kMaxOtherPixelShare * double(g.kept_both));
 }
 
 // A variance image for photograph `pixels` (images[].variance): 1e-6 + (0.05 p)² per channel
