@@ -16,13 +16,16 @@
 // texel is then "seen" -> the light is not grazing -> the segment to the light is free -> every
 // tap sees the texel's own, lit surface (the camera ray through the tap's pixel centre hits the
 // mesh within a depth tolerance of the texel, and that hit point is lit as the renderer decides
-// it: both normals face the light and its shadow ray is free) -> the pixel values are usable:
-// every tap finite (else kInvalid), no tap clipped, the interpolated value not negative beyond
-// the noise (else kInvalid) and above the noise floor.
+// it: both normals face the light and its shadow ray is free) -> the sample point (SamplePoint:
+// by default the tap whose hit lies nearest the texel centre, at that hit's geometry, its own
+// normal not grazing, else kEdgeSurface / kEdgeShadow) -> the pixel values are usable: every
+// tap read finite (else kInvalid), none clipped, the value not negative beyond the noise (else
+// kInvalid) and above the noise floor.
 //
 // The noise of a sample comes from the photograph's variance image when the capture gives one
-// (images[].variance, e.g. from `reflcap hdr`'s merge): the interpolated value Σ w_k p_k of
-// independent pixels has variance Σ w_k² var_k (MeasuredVariance below), to which the relative
+// (images[].variance, e.g. from `reflcap hdr`'s merge): the value Σ w_k p_k of independent
+// pixels (one pixel of weight 1 under SamplePoint::kPixel, the bilinear weights under kTexel)
+// has variance Σ w_k² var_k (MeasuredVariance below), to which the relative
 // floor is added as in the noise model; otherwise from the noise model (NoiseModel). Either
 // variance, divided by the sample's scale² (the value's own scaling), gives the weight 1 / var,
 // and the same noise decides the invalid and dark tests.

@@ -14,12 +14,17 @@
 //      with pixel_size_m) so that each texel centre is sampled exactly where the CPU casts a
 //      pixel's camera ray; per texel the distance along that ray, whether the hit is lit (normals
 //      facing the light, no occluder in the light map) and whether anything is hit — the CPU's
-//      pixel map, for every pixel at once. With lens distortion the map is the undistorted grid
-//      covering the photograph's footprint, and a pixel's ray reads the nearest map texel.
+//      pixel map, for every pixel at once; a second attachment holds the hit's interpolated
+//      shading normal (SamplePoint::kPixel measures the sample with it). With lens distortion the
+//      map is the undistorted grid covering the photograph's footprint, and a pixel's ray reads
+//      the nearest map texel (its distance and normal then belong to a point up to half a map
+//      texel from the pixel's own hit).
 //   3. masks.comp, one invocation per texel: view grazing, projection, occlusion (camera map,
 //      receiver-plane depth), light grazing, cast shadow (light map), footprint (every bilinear
-//      tap's camera-map texel a hit within the edge depth tolerance, and lit), pixel tests, and
-//      the sample (value, weight, wi/wo in the tangent frame). With the photograph's variance
+//      tap's camera-map texel a hit within the edge depth tolerance, and lit), the sample point
+//      (kPixel: the tap whose hit — its ray at the map's distance — lies nearest the texel
+//      centre, at that hit's geometry), pixel tests, and the sample (value, weight, wi/wo in the
+//      tangent frame). With the photograph's variance
 //      image (images[].variance) bound, the pixel tests and weights take their noise from it
 //      exactly as the CPU does (MeasuredVariance and its neighbours in image_resampler.h).
 //
