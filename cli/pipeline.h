@@ -23,6 +23,8 @@ struct PipelineOptions {
   // The holdout render's interreflection (--indirect, --indirect-bounces, --indirect-rays).
   render::IndirectMode indirect = render::IndirectMode::kAuto;
   int indirect_bounces = 2, indirect_rays = 64;
+  // The holdout render's pixel model (--supersample N|auto; render::kAutoSupersampling = auto).
+  int supersampling = render::kAutoSupersampling;
   bool overwrite = false;
 };
 struct PipelineSummary {

@@ -20,8 +20,8 @@ namespace fs = std::filesystem;
 
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
-  int supersample = 1, writers = 0, indirect_bounces = 2, indirect_rays = 64;
-  std::string indirect = "auto";
+  int writers = 0, indirect_bounces = 2, indirect_rays = 64;
+  std::string indirect = "auto", supersample = "auto";
   bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -44,7 +44,10 @@ int RunRender(int argc, char** argv) {
                  "Vulkan device: index or name substring (default: automatic; --backend vulkan)");
   args.AddString("shadow-map", &shadow_map, "KIND",
                  "Vulkan point-light shadow map: auto (default), cube or fitted");
-  args.AddInt("supersample", &supersample, "N x N samples per pixel, 1..16 (default 1); mesh captures");
+  args.AddString("supersample", &supersample, "N|auto",
+                 "N x N rays per pixel averaged over it (a box filter), 1..16, or auto (default): "
+                 "4 x 4 when the train photographs integrate over their pixels, else 1 (the pixel "
+                 "centre); mesh captures");
   args.AddFlag("no-shadows", &no_shadows,
                "no cast shadows: no shadow rays (mesh captures), no height-field shadows (normal "
                "maps)");
@@ -84,9 +87,8 @@ int RunRender(int argc, char** argv) {
   if (backend != "cpu" && backend != "vulkan") {
     return usage("--backend: \"" + backend + "\" is not one of cpu, vulkan");
   }
-  if (supersample < 1 || supersample > render::kMaxSupersampling) {
-    return usage(StrCat("--supersample must be in [1, ", render::kMaxSupersampling, "], got ", supersample));
-  }
+  const StatusOr<int> supersampling = render::ParseSupersampling(supersample, "--supersample");
+  if (!supersampling.ok()) return usage(supersampling.status().message());
   if (writers < 0 || writers > 256) {
     return usage(StrCat("--writers must be in [0, 256], got ", writers));
   }
@@ -142,7 +144,7 @@ int RunRender(int argc, char** argv) {
   if (!staging.ok()) return ReportError("render", staging.status());
   render::CaptureRenderOptions options;
   options.split = *selection;
-  options.supersampling = supersample;
+  options.supersampling = *supersampling;
   options.cast_shadows = !no_shadows;
   options.height_shadows = !no_height_shadows;
   options.writers = writers;

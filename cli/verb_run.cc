@@ -107,6 +107,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   render_options.indirect = options.indirect;
   render_options.indirect_bounces = options.indirect_bounces;
   render_options.indirect_rays = options.indirect_rays;
+  render_options.supersampling = options.supersampling;
   bool rendered = false;
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER
   // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
@@ -171,6 +172,10 @@ int RunRun(int argc, char** argv) {
   args.AddFlag("variance-weights", &options.resample.use_variance,
                "resample: weight photographs that have images[].variance by it (default: the "
                "noise model)");
+  std::string supersample = "auto";
+  args.AddString("supersample", &supersample, "N|auto",
+                 "holdout render: N x N rays per pixel averaged over it, 1..16, or auto (default: "
+                 "4 x 4 when the train photographs integrate over their pixels, else 1)");
   std::string sample_point = "pixel";
   args.AddString("sample-point", &sample_point, "pixel|texel",
                  "resample: measure each texel at its nearest pixel's surface point (pixel, "
@@ -213,6 +218,12 @@ int RunRun(int argc, char** argv) {
       return kExitUsage;
     }
     options.resample.sample_point = *point;
+    auto supersampling = render::ParseSupersampling(supersample, "--supersample");
+    if (!supersampling.ok()) {
+      std::fprintf(stderr, "reflcap run: %s\n", supersampling.status().message().c_str());
+      return kExitUsage;
+    }
+    options.supersampling = *supersampling;
   }
   {
     auto mode = render::ParseIndirectMode(indirect, "--indirect");

@@ -59,6 +59,10 @@ TEST(VerbsCli, HelpAndUsageErrors) {
   EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt --out x --indirect-bounces 9", dir).exit_code, 1);
   EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt --out x --indirect-rays 0", dir).exit_code, 1);
   EXPECT_EQ(RunCli("run " + cap + " --out x --indirect-rays 2000", dir).exit_code, 1);
+  EXPECT_EQ(RunCli("render " + cap + " " + cap + "/gt --out x --supersample many", dir).exit_code, 1);
+  r = RunCli("run " + cap + " --out x --supersample 17", dir);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--supersample"), std::string::npos) << r.err;
   r = RunCli("run " + cap + " --out x --sample-point centre", dir);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("--sample-point"), std::string::npos) << r.err;
