@@ -703,7 +703,9 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
       const uint32_t m = pixels[base + i];
       f.map_depth[m].store(hits[i].hit ? hits[i].t : 0.0f, std::memory_order_relaxed);
       if (f.map_normal != nullptr) {
-        for (int k = 0; k < 3; ++k) f.map_normal[3 * m + k].store(hit_normal[i][k], std::memory_order_relaxed);
+        for (int k = 0; k < 3; ++k) {
+          f.map_normal[3 * m + k].store(hit_normal[i][k], std::memory_order_relaxed);
+        }
       }
       f.map_state[m].store(state[i], std::memory_order_release);
     }

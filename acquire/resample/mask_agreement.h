@@ -76,9 +76,10 @@ struct MaskAgreement {
   double max_weight_rel_diff = 0;
   double max_direction_diff = 0;  // largest |wi - wi'| or |wo - wo'| component
   // SamplePoint::kPixel: samples both keep whose view directions differ by more than
-  // kSamePixelFraction of a pixel's angle (pinhole maps) — the two paths chose different taps, because two taps' hits lay at
-  // almost the same distance from the texel centre (float rounding decides). Their values are
-  // different pixels', so they are counted here and left out of the three maxima above.
+  // kSamePixelFraction of a pixel's angle (pinhole maps): the two paths chose different taps,
+  // because two taps' hits lay at almost the same distance from the texel centre (rounding
+  // decides). Their values are different pixels', so they are counted here and left out of the
+  // three maxima above.
   uint64_t other_pixel = 0;
   // confusion[embree * kOutcomeCount + vulkan]: pairs per (Embree outcome, Vulkan outcome).
   std::array<uint64_t, 121> confusion{};
