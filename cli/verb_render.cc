@@ -99,17 +99,20 @@ int RunRender(int argc, char** argv) {
   }
   auto indirect_mode = render::ParseIndirectMode(indirect, "--indirect");
   if (!indirect_mode.ok()) return usage(indirect_mode.status().message());
-  if (indirect_bounces < 1 || indirect_bounces > render::kMaxIndirectBounces) {
-    return usage(StrCat("--indirect-bounces must be in [1, ", render::kMaxIndirectBounces,
-                        "], got ", indirect_bounces));
-  }
-  if (indirect_rays < 1 || indirect_rays > render::kMaxIndirectRays) {
-    return usage(StrCat("--indirect-rays must be in [1, ", render::kMaxIndirectRays, "], got ",
-                        indirect_rays));
-  }
   auto parsed_shard = ParseShard(shard_text);  // "" = every selected photograph
   if (!parsed_shard.ok()) return usage(parsed_shard.status().message());
   const Shard shard = *parsed_shard;
+  render::CaptureRenderOptions options;
+  options.split = *selection;
+  options.supersampling = *supersampling;
+  options.cast_shadows = !no_shadows;
+  options.height_shadows = !no_height_shadows;
+  options.writers = writers;
+  options.indirect = *indirect_mode;
+  options.indirect_bounces = indirect_bounces;  // range checked by Validate
+  options.indirect_rays = indirect_rays;
+  options.shard = shard;
+  if (Status s = options.Validate(); !s.ok()) return usage(s.message());
   auto capture = ReadCapture(capture_path);
   if (!capture.ok()) return ReportError("render", capture.status());
   fs::path params = fit;
@@ -142,16 +145,6 @@ int RunRender(int argc, char** argv) {
 #endif
   auto staging = StagingDir::Create(out, overwrite);
   if (!staging.ok()) return ReportError("render", staging.status());
-  render::CaptureRenderOptions options;
-  options.split = *selection;
-  options.supersampling = *supersampling;
-  options.cast_shadows = !no_shadows;
-  options.height_shadows = !no_height_shadows;
-  options.writers = writers;
-  options.indirect = *indirect_mode;
-  options.indirect_bounces = indirect_bounces;
-  options.indirect_rays = indirect_rays;
-  options.shard = shard;
   std::string device_name = "the cpu";
   StatusOr<render::CaptureRenderSummary> summary = InternalError("no backend ran");
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER

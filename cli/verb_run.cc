@@ -212,33 +212,23 @@ int RunRun(int argc, char** argv) {
   }
   options.resample.height_shadows = !no_height_shadows;
   {
-    auto point = resample::ParseSamplePoint(sample_point);
-    if (!point.ok()) {
-      std::fprintf(stderr, "reflcap run: %s\n", point.status().message().c_str());
-      return kExitUsage;
+    const auto point = resample::ParseSamplePoint(sample_point);
+    const auto supersampling = render::ParseSupersampling(supersample, "--supersample");
+    const auto mode = render::ParseIndirectMode(indirect, "--indirect");
+    // The render stage's ranges, checked before any stage runs.
+    render::CaptureRenderOptions render_check;
+    render_check.indirect_bounces = options.indirect_bounces;
+    render_check.indirect_rays = options.indirect_rays;
+    for (const Status& s : {point.status(), supersampling.status(), mode.status(),
+                            render_check.Validate()}) {
+      if (!s.ok()) {
+        std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
+        return kExitUsage;
+      }
     }
     options.resample.sample_point = *point;
-    auto supersampling = render::ParseSupersampling(supersample, "--supersample");
-    if (!supersampling.ok()) {
-      std::fprintf(stderr, "reflcap run: %s\n", supersampling.status().message().c_str());
-      return kExitUsage;
-    }
     options.supersampling = *supersampling;
-  }
-  {
-    auto mode = render::ParseIndirectMode(indirect, "--indirect");
-    if (!mode.ok()) {
-      std::fprintf(stderr, "reflcap run: %s\n", mode.status().message().c_str());
-      return kExitUsage;
-    }
     options.indirect = *mode;
-    render::CaptureRenderOptions check;
-    check.indirect_bounces = options.indirect_bounces;
-    check.indirect_rays = options.indirect_rays;
-    if (Status s = check.Validate(); !s.ok()) {
-      std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
-      return kExitUsage;
-    }
   }
   if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
     std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
