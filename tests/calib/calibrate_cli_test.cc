@@ -25,7 +25,7 @@ CliResult RunCli(const std::string& args, const ScratchDir& dir) {
 
 // One rendered session (2 cameras x 4 angles, 4 board photos per camera) shared by the tests.
 const fs::path& Session() {
-  static ScratchDir* dir = new ScratchDir();
+  static const ScratchDir* dir = &reflcap::testing::NewProcessScratchDir();
   static const fs::path path = [] {
     calib::testing::SyntheticRig rig = calib::testing::MakeRig(2, 4);
     calib::testing::SessionOptions o;

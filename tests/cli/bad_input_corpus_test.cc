@@ -114,7 +114,7 @@ void RunCases(const std::vector<Case>& cases) {
 // ---- Fixtures (made once per test process by the reflcap binary itself) ----------------------
 
 const fs::path& Fixtures() {
-  static ScratchDir* dir = new ScratchDir();
+  static const ScratchDir* dir = &reflcap::testing::NewProcessScratchDir();
   return dir->path();
 }
 

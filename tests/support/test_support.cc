@@ -75,6 +75,13 @@ void ReleaseBeforeExit(std::function<void()> release) {
   ::testing::AddGlobalTestEnvironment(new ReleaseEnvironment(std::move(release)));
 }
 
+const ScratchDir& NewProcessScratchDir() {
+  // Each call makes its own folder, so two fixtures in one binary never share one.
+  auto* dir = new ScratchDir();
+  ReleaseBeforeExit([dir] { delete dir; });
+  return *dir;
+}
+
 }  // namespace reflcap::testing
 
 namespace reflcap::testing {

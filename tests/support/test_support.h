@@ -39,6 +39,11 @@ void WriteText(const std::filesystem::path& path, const std::string& text);
 // lavapipe tolerates it). Releases run in the reverse order of registration.
 void ReleaseBeforeExit(std::function<void()> release);
 
+// A new scratch folder that lives until the program's tests have finished (for fixtures made once
+// per test process), then is removed like any ScratchDir. ctest runs each test in its own
+// process, so a fixture folder that were never removed would be left behind once per test.
+const ScratchDir& NewProcessScratchDir();
+
 }  // namespace reflcap::testing
 
 namespace reflcap::testing {

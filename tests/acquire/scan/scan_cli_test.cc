@@ -42,7 +42,12 @@ struct Fixture {
 };
 
 Fixture& Shared() {
-  static Fixture* f = new Fixture();
+  static Fixture* f = [] {
+    auto* made = new Fixture();
+    // Removed after the last test: ctest runs each test in a process of its own.
+    reflcap::testing::ReleaseBeforeExit([made] { delete made; });
+    return made;
+  }();
   return *f;
 }
 

@@ -58,7 +58,7 @@ const std::vector<double> kAngles = {0, 120, 240};
 
 // Writes the synthetic scan once per test binary (about a second).
 const testing::SyntheticScan& Scan() {
-  static ScratchDir* dir = new ScratchDir();
+  static const ScratchDir* dir = &reflcap::testing::NewProcessScratchDir();
   static const testing::SyntheticScan scan = testing::WriteSyntheticScan(dir->path() / "scan");
   return scan;
 }

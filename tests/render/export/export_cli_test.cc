@@ -31,7 +31,7 @@ CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
 
 // A tiny synthetic capture, made once for this file; its gt/ folder is the FIT exported.
 const fs::path& TinyCapture() {
-  static testing::ScratchDir* dir = new testing::ScratchDir();
+  static const testing::ScratchDir* dir = &reflcap::testing::NewProcessScratchDir();
   static const fs::path capture = [] {
     testing::ScratchDir logs;
     const fs::path out = *dir / "tiny";

@@ -48,7 +48,7 @@ bool HaveChromium() { return std::system("command -v chromium > /dev/null 2>&1")
 
 // A small synthetic capture with 128-px photographs, made once for this file.
 const fs::path& SmallCapture() {
-  static testing::ScratchDir* dir = new testing::ScratchDir();
+  static const testing::ScratchDir* dir = &reflcap::testing::NewProcessScratchDir();
   static const fs::path capture = [] {
     testing::ScratchDir logs;
     const fs::path out = *dir / "small";

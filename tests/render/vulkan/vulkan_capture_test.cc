@@ -37,6 +37,8 @@ struct SynthCapture {
 const SynthCapture& Synth() {
   static SynthCapture* s = [] {
     auto* sc = new SynthCapture();
+    // Its folder removed after the last test: ctest runs each test in a process of its own.
+    reflcap::testing::ReleaseBeforeExit([sc] { delete sc; });
     synth::SynthOptions o;
     o.noise = 0;
     o.texels = 4000;
