@@ -69,6 +69,12 @@ int RunResample(int argc, char** argv) {
                  "its centre, with that point's normal and directions (pixel, default), or "
                  "interpolate the four pixels around its projection at the texel centre's "
                  "geometry (texel: less noise, blurs highlights)");
+  std::string pixel_filter = "capture";
+  args.AddString("pixel-filter", &pixel_filter, "capture|area|point",
+                 "with --sample-point pixel: what a photograph's pixel measures — its footprint's "
+                 "radiance (area: a texel whose pixels all hit other texels takes the nearest) or "
+                 "the ray through its centre (point: such a pair is rejected, as edge); default "
+                 "capture: each camera's cameras[].pixel_filter, area when absent");
   int chunk_texels = int(options.chunk_texels);
   args.AddInt("chunk-texels", &chunk_texels,
               StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,
@@ -107,8 +113,9 @@ int RunResample(int argc, char** argv) {
   auto parsed_split = resample::ParseSplit(split);
   auto parsed_backend = resample::ParseBackend(backend);
   auto parsed_point = resample::ParseSamplePoint(sample_point);
-  for (const Status& s :
-       {parsed_split.status(), parsed_backend.status(), parsed_point.status()}) {
+  auto parsed_filter = resample::ParsePixelFilter(pixel_filter);
+  for (const Status& s : {parsed_split.status(), parsed_backend.status(), parsed_point.status(),
+                          parsed_filter.status()}) {
     if (!s.ok()) {
       std::fprintf(stderr, "reflcap resample: %s\n", s.message().c_str());
       return kExitUsage;
@@ -117,6 +124,7 @@ int RunResample(int argc, char** argv) {
   options.split = *parsed_split;
   options.backend = *parsed_backend;
   options.sample_point = *parsed_point;
+  options.pixel_filter = *parsed_filter;
   options.height_shadows = !no_height_shadows;
   if (chunk_texels < 1) {
     std::fprintf(stderr, "reflcap resample: --chunk-texels must be >= 1\n");

@@ -180,6 +180,10 @@ int RunRun(int argc, char** argv) {
   args.AddString("sample-point", &sample_point, "pixel|texel",
                  "resample: measure each texel at its nearest pixel's surface point (pixel, "
                  "default) or interpolate pixels at the texel centre (texel)");
+  std::string pixel_filter = "capture";
+  args.AddString("pixel-filter", &pixel_filter, "capture|area|point",
+                 "resample: what a photograph's pixel measures, its footprint (area) or its "
+                 "centre's ray (point); default capture: cameras[].pixel_filter, else area");
   bool no_height_shadows = false;
   args.AddFlag("no-height-shadows", &no_height_shadows,
                "normal-map captures: no cast shadows from the height field integrated from the "
@@ -213,20 +217,22 @@ int RunRun(int argc, char** argv) {
   options.resample.height_shadows = !no_height_shadows;
   {
     const auto point = resample::ParseSamplePoint(sample_point);
+    const auto filter = resample::ParsePixelFilter(pixel_filter);
     const auto supersampling = render::ParseSupersampling(supersample, "--supersample");
     const auto mode = render::ParseIndirectMode(indirect, "--indirect");
     // The render stage's ranges, checked before any stage runs.
     render::CaptureRenderOptions render_check;
     render_check.indirect_bounces = options.indirect_bounces;
     render_check.indirect_rays = options.indirect_rays;
-    for (const Status& s : {point.status(), supersampling.status(), mode.status(),
-                            render_check.Validate()}) {
+    for (const Status& s : {point.status(), filter.status(), supersampling.status(),
+                            mode.status(), render_check.Validate()}) {
       if (!s.ok()) {
         std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
         return kExitUsage;
       }
     }
     options.resample.sample_point = *point;
+    options.resample.pixel_filter = *filter;
     options.supersampling = *supersampling;
     options.indirect = *mode;
   }

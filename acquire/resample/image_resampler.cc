@@ -88,6 +88,13 @@ StatusOr<SamplePoint> ParseSamplePoint(const std::string& name) {
   return InvalidArgumentError("--sample-point: \"", name, "\" is not pixel or texel");
 }
 
+StatusOr<std::optional<PixelFilter>> ParsePixelFilter(const std::string& name) {
+  if (name == "capture") return std::optional<PixelFilter>();
+  if (name == "area") return std::optional<PixelFilter>(PixelFilter::kArea);
+  if (name == "point") return std::optional<PixelFilter>(PixelFilter::kPoint);
+  return InvalidArgumentError("--pixel-filter: \"", name, "\" is not capture, area or point");
+}
+
 const char* OutcomeName(Outcome outcome) {
   switch (outcome) {
     case Outcome::kKept: return "kept";
@@ -101,6 +108,7 @@ const char* OutcomeName(Outcome outcome) {
     case Outcome::kInvalid: return "invalid";
     case Outcome::kClipped: return "clipped";
     case Outcome::kDark: return "dark";
+    case Outcome::kEdgeTexel: return "edge_other_texel";
   }
   return "?";
 }
@@ -124,7 +132,8 @@ Reason ReasonOf(Outcome outcome) {
     case Outcome::kGrazingLight: return Reason::kGrazing;
     case Outcome::kEdgeOutside:
     case Outcome::kEdgeSurface:
-    case Outcome::kEdgeShadow: return Reason::kEdge;
+    case Outcome::kEdgeShadow:
+    case Outcome::kEdgeTexel: return Reason::kEdge;
     case Outcome::kOccluded: return Reason::kOccluded;
     case Outcome::kShadowed: return Reason::kShadowed;
     case Outcome::kInvalid: return Reason::kInvalid;
@@ -160,6 +169,11 @@ struct ImageResampler::Frame {
   std::unique_ptr<std::atomic<float>[]> map_depth;    // distance along the unit pixel ray
   // SamplePoint::kPixel: the hit's unit shading normal (x, y, z per pixel), stored with depth.
   std::unique_ptr<std::atomic<float>[]> map_normal;
+  // SamplePoint::kPixel: the texel under the hit's UV (TexelAtlas::TexelUnderUv; -1: none).
+  std::unique_ptr<std::atomic<int32_t>[]> map_texel;
+  // SamplePoint::kPixel: the camera's pixels are point samples (PixelFilter::kPoint), so a pair
+  // whose taps all hit other texels is rejected (kEdgeTexel) instead of taking the nearest.
+  bool point_pixels = false;
 
   // The camera ray through pixel (x, y), object frame; dir unit.
   void PixelRay(int x, int y, Vec3f* origin, Vec3f* dir) const {
@@ -215,6 +229,7 @@ StatusOr<std::unique_ptr<ImageResampler>> ImageResampler::Create(const Capture& 
     for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
       r->triangle_normals_[t] = mesh.GeometricNormal(t);
     }
+    r->texel_sides_m_ = TexelSidesM(mesh, atlas);
   } else {
     for (size_t i = 0; i < capture.images.size(); ++i) {
       const CaptureImage& image = capture.images[i];
@@ -298,6 +313,7 @@ Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageO
   f.intensity = light.intensity.cast<float>();
   f.exposure = float(image.exposure_s);
   f.saturation = float(image.saturation);
+  f.point_pixels = pixel_filter_.value_or(camera.pixel_filter) == PixelFilter::kPoint;
   f.footprint_scale = f.pinhole ? 1.0 / std::min(std::abs(camera.K(0, 0)), std::abs(camera.K(1, 1)))
                                 : camera.pixel_size_m;
   // A normal-map capture has no turntable (Create checked), so the object frame is the world's.
@@ -314,6 +330,7 @@ Status ImageResampler::Process(uint32_t image_index, const Image& pixels, ImageO
     f.map_depth.reset(new std::atomic<float>[pixel_count]());
     if (sample_point_ == SamplePoint::kPixel) {
       f.map_normal.reset(new std::atomic<float>[3 * pixel_count]());
+      f.map_texel.reset(new std::atomic<int32_t>[pixel_count]());
     }
   }
 
@@ -562,8 +579,10 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const
     const double tan_v = std::sqrt(std::max(0.0, 1 - cos_v * cos_v)) / cos_v;
     const float tolerance = float(kEdgeDepthSlack * footprint * (1 + std::sqrt(2.0) * tan_v));
     Outcome outcome = Outcome::kKept;
-    // SamplePoint::kPixel: the tap whose hit lies nearest the texel centre (ties: the first).
+    // SamplePoint::kPixel: of the taps whose hit lies in the texel, the one nearest its centre;
+    // when there is none, the nearest of all (ties: the first).
     int nearest = -1;
+    bool nearest_inside = false;
     float nearest_d2 = kInfinity;
     Vec3f nearest_hit = Vec3f::Zero(), nearest_dir = Vec3f::Zero();
     for (int k = 0; k < 4 && outcome == Outcome::kKept; ++k) {
@@ -584,14 +603,25 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const
         break;
       }
       if (!(state & kMapLit)) outcome = Outcome::kEdgeShadow;
+      if (f.map_texel == nullptr) continue;
       const Vec3f hit = origin + depth * dir;
       const float d2 = (hit - p).squaredNorm();
-      if (d2 < nearest_d2) {
+      const bool inside = f.map_texel[m].load(std::memory_order_relaxed) == int32_t(c.texel);
+      if ((inside && !nearest_inside) || (inside == nearest_inside && d2 < nearest_d2)) {
         nearest = k;
+        nearest_inside = inside;
         nearest_d2 = d2;
         nearest_hit = hit;
         nearest_dir = dir;
       }
+    }
+    // A point camera's texel that no tap's hit lies in, which this view resolves: each of those
+    // pixels measured another texel (kEdgeTexel); an unresolved one keeps the nearest.
+    const bool resolved =
+        texel_sides_m_[c.texel] * std::sqrt(c.cos_v) >= kMinResolvedTexelPixels * float(footprint);
+    if (outcome == Outcome::kKept && sample_point_ == SamplePoint::kPixel && !nearest_inside &&
+        f.point_pixels && resolved) {
+      outcome = Outcome::kEdgeTexel;
     }
     if (outcome != Outcome::kKept) {
       set(c.texel, outcome);
@@ -664,8 +694,10 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
     rays[2] += n;
     std::array<uint8_t, 16> state{};
     std::array<Vec3f, 16> hit_normal;
+    std::array<int32_t, 16> hit_texel;
     for (size_t i = 0; i < 16; ++i) {
       hit_normal[i] = Vec3f::Zero();
+      hit_texel[i] = -1;
       lit_valid[i] = false;
       lorigin[i] = ldir[i] = Vec3f::UnitZ();
       ltfar[i] = 0;
@@ -680,6 +712,8 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
       const float b1 = hits[i].b1, b2 = hits[i].b2;
       const Vec3f n_s = ((1 - b1 - b2) * cn[0] + b1 * cn[1] + b2 * cn[2]).normalized();
       hit_normal[i] = n_s;
+      const auto& cuv = mesh.corner_uvs[tri];
+      hit_texel[i] = atlas_->TexelUnderUv((1 - b1 - b2) * cuv[0] + b1 * cuv[1] + b2 * cuv[2]);
       const Vec3f& n_g = triangle_normals_[tri];
       Vec3f wi;
       float dist;
@@ -706,6 +740,7 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
         for (int k = 0; k < 3; ++k) {
           f.map_normal[3 * m + k].store(hit_normal[i][k], std::memory_order_relaxed);
         }
+        f.map_texel[m].store(hit_texel[i], std::memory_order_relaxed);
       }
       f.map_state[m].store(state[i], std::memory_order_release);
     }

@@ -7,7 +7,7 @@
 #include "acquire/resample/image_resampler.h"
 
 namespace reflcap::resample {
-static_assert(kOutcomeCount * kOutcomeCount == 121, "MaskAgreement::confusion is 11 x 11");
+static_assert(kOutcomeCount * kOutcomeCount == 144, "MaskAgreement::confusion is 12 x 12");
 namespace {
 
 double RelDiff(double a, double b) {
@@ -15,7 +15,9 @@ double RelDiff(double a, double b) {
   return m > 0 ? std::abs(a - b) / m : 0.0;
 }
 
-bool FootprintEdge(Outcome o) { return o == Outcome::kEdgeSurface || o == Outcome::kEdgeShadow; }
+bool FootprintEdge(Outcome o) {
+  return o == Outcome::kEdgeSurface || o == Outcome::kEdgeShadow || o == Outcome::kEdgeTexel;
+}
 // Decided before the visibility mask by the same float/double geometry on both paths.
 bool BeforeVisibility(Outcome o) { return o == Outcome::kGrazingView || o == Outcome::kEdgeOutside; }
 

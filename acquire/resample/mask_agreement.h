@@ -8,7 +8,8 @@
 // first mask on which the two differ, in test order:
 //   visible   one path has the texel seen by the camera (Seen) and the other occluded;
 //   lit       both see it, one has it in cast shadow (kShadowed) and the other not;
-//   footprint both see it lit, one rejects it at a footprint edge (kEdgeSurface / kEdgeShadow)
+//   footprint both see it lit, one rejects it at a footprint edge (kEdgeSurface / kEdgeShadow /
+//             kEdgeTexel, a hit on the texel border rounded to either side)
 //             and the other not;
 //   other     anything else: the view-grazing, projection or light-grazing test decided
 //             differently by float rounding (the CPU projects in double), kEdgeSurface against
@@ -82,7 +83,7 @@ struct MaskAgreement {
   // three maxima above.
   uint64_t other_pixel = 0;
   // confusion[embree * kOutcomeCount + vulkan]: pairs per (Embree outcome, Vulkan outcome).
-  std::array<uint64_t, 121> confusion{};
+  std::array<uint64_t, 144> confusion{};
 
   uint64_t disagreeing() const { return pairs - agreeing; }
   double AgreeingFraction() const { return pairs ? double(agreeing) / double(pairs) : 1.0; }

@@ -145,8 +145,25 @@ Json CheckpointIdentity(const Capture& capture, const ResampleOptions& options,
               {"variance_weights", options.use_variance},
               {"height_shadows", options.height_shadows},
               {"sample_point", SamplePointName(options.sample_point)},
+              {"pixel_filter", options.pixel_filter ? PixelFilterName(*options.pixel_filter)
+                                                    : "capture"},
               {"images", images.size()},
               {"images_crc32", Crc32(images.data(), images.size() * sizeof(uint32_t))}};
+}
+
+// resample_report.json pixel_filter: per camera, what its pixels were taken to measure.
+Json PixelFilterReport(const Capture& capture, const ResampleOptions& options, bool normal_map) {
+  Json cameras = Json::object();
+  for (const Camera& cam : capture.cameras) {
+    cameras[cam.id] = PixelFilterName(options.pixel_filter.value_or(cam.pixel_filter));
+  }
+  return {{"source", options.pixel_filter ? "--pixel-filter" : "capture cameras[].pixel_filter"},
+          {"cameras", cameras},
+          {"used", !normal_map && options.sample_point == SamplePoint::kPixel},
+          {"definition", "area: a pixel integrates its footprint, so a texel whose four pixels "
+                         "all hit other texels takes the one hitting nearest its centre; point: "
+                         "a pixel is the ray through its centre, so such a pair is rejected "
+                         "(edge_other_texel)"}};
 }
 
 }  // namespace
@@ -384,6 +401,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                                                   options.min_cos, options.threads));
   REFLCAP_RETURN_IF_ERROR(resampler->SetHeightField(height_field.get()));
   resampler->SetSamplePoint(options.sample_point);
+  resampler->SetPixelFilter(options.pixel_filter);
   // The Vulkan masks replace the Embree path for mesh captures (a normal-map capture casts no
   // ray: it runs the CPU path under either backend).
   std::unique_ptr<VulkanMasks> masks;
@@ -392,6 +410,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     VulkanMaskOptions mo;
     mo.device = options.device;
     mo.sample_point = options.sample_point;
+    mo.pixel_filter = options.pixel_filter;
     REFLCAP_ASSIGN_OR_RETURN(masks, VulkanMasks::Create(capture, atlas, *mesh_data,
                                                         scene->SurfaceOffset(), noise.model,
                                                         options.min_cos, mo));
@@ -637,6 +656,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
       {"geometry", info.geometry},
       {"sample_point", normal_map ? std::string("own pixel (a normal map's texel is one)")
                                   : std::string(SamplePointName(options.sample_point))},
+      {"pixel_filter", PixelFilterReport(capture, options, normal_map)},
       {"visibility", normal_map && height_field != nullptr
                          ? "normal map: every texel is visible (an orthographic view sees each of "
                            "its pixels; no occlusion or footprint test); cast shadow from the "

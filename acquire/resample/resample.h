@@ -114,6 +114,10 @@ struct ResampleOptions {
   // pixel whose hit is nearest the texel, with that hit's geometry (kPixel, `--sample-point
   // pixel`, the default), or the bilinear interpolation at the texel centre (kTexel).
   SamplePoint sample_point = SamplePoint::kPixel;
+  // What the photographs' pixels measure (engine/camera/camera.h PixelFilter), for kPixel's
+  // choice when no tap's hit lies in the texel: nullopt (`--pixel-filter capture`, the default)
+  // = each camera's cameras[].pixel_filter, else this for every camera.
+  std::optional<PixelFilter> pixel_filter;
   uint32_t chunk_texels = kDefaultChunkTexels;  // >= 1
   // Checkpoints (`resample --resume`). When not empty, the reorder's spill files live in this
   // folder (the CLI uses OUT.checkpoint beside OUT) and, every checkpoint_seconds of work (0:

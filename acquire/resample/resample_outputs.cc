@@ -249,7 +249,8 @@ StatusOr<Counted> WriteCountedOutputs(const fs::path& out_dir, const TexelAtlas&
   r["reason_order"] =
       "each (texel, image) pair is counted once, under the first test it fails: grazing (view) > "
       "edge (outside the image) > occluded > grazing (light) > shadowed > edge (footprint: "
-      "silhouette, depth or shadow boundary) > invalid > clipped > dark; kept + rejected = pairs";
+      "silhouette, depth or shadow boundary) > edge (a point-sampling camera's pixels around the "
+      "texel all measured other texels) > invalid > clipped > dark; kept + rejected = pairs";
   r["samples_per_texel"] = Distribution(samples_seen);
   r["samples_per_texel_population"] =
       "texels_seen (texels some selected camera sees: view not grazing, inside the image, not "

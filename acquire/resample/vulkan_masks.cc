@@ -48,8 +48,12 @@ static_assert(sh::kMaskKept == uint32_t(Outcome::kKept) &&
               sh::kMaskEdgeShadow == uint32_t(Outcome::kEdgeShadow) &&
               sh::kMaskInvalid == uint32_t(Outcome::kInvalid) &&
               sh::kMaskClipped == uint32_t(Outcome::kClipped) &&
-              sh::kMaskDark == uint32_t(Outcome::kDark) && kOutcomeCount == 11,
+              sh::kMaskDark == uint32_t(Outcome::kDark) &&
+              sh::kMaskEdgeTexel == uint32_t(Outcome::kEdgeTexel) && kOutcomeCount == 12,
               "shaders/shared/resample_masks.h outcome codes must equal resample::Outcome");
+
+static_assert(sh::kMaskMinResolvedTexelPixels == kMinResolvedTexelPixels,
+              "shaders/shared/resample_masks.h must hold resample::kMinResolvedTexelPixels");
 
 // The light pass (gpu::LightMapPass) pushes a LightMapPush; mask_light.frag reads a MaskDrawPush.
 static_assert(sizeof(sh::MaskDrawPush) == sizeof(sh::LightMapPush),
@@ -59,7 +63,7 @@ static_assert(sizeof(sh::MaskDrawPush) == sizeof(sh::LightMapPush),
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindLightMap = 3,
                    kBindCameraMap = 4, kBindTexels = 5, kBindRays = 6, kBindPixels = 7,
                    kBindOutcomes = 8, kBindSamples = 9, kBindVariance = 10,
-                   kBindCameraNormal = 11;
+                   kBindCameraNormal = 11, kBindTexelOfPixel = 12;
 // MaskParams::relative_sigma_floor.y: 1 when binding 10 holds the photograph's variance image
 // (images[].variance) and masks.comp takes each sample's noise from it (z, w: kDarkSigmas and
 // kInvalidSigmas), 0 when the noise model (MaskParams::noise) applies.
@@ -134,7 +138,7 @@ struct VulkanMasks::Impl {
   Pipeline camera_pipeline, texel_pipeline;
 
   std::unique_ptr<Buffer> params, corners, triangle_normals, texels, pixels, outcomes, samples,
-      map_readback, no_rays, variances;
+      map_readback, no_rays, variances, texel_of_pixel;
   std::map<int, CameraGrid> grids;  // by camera index
   std::unique_ptr<PassTarget> camera_target;
   uint32_t triangle_count = 0;
@@ -167,7 +171,8 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kGfx},
                                                            {kBindCorners, kSsbo, kGfx},
                                                            {kBindTriangles, kSsbo, kGfx},
-                                                           {kBindLightMap, kTex, kGfx}}));
+                                                           {kBindLightMap, kTex, kGfx},
+                                                           {kBindTexelOfPixel, kSsbo, kGfx}}));
   REFLCAP_ASSIGN_OR_RETURN(texel_layout,
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kComp},
                                                            {kBindLightMap, kTex, kComp},
@@ -201,7 +206,9 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
     for (int k = 0; k < 3; ++k) {
       const Vec3f& p = mesh.positions[mesh.triangles[t][k]];
       const Vec3f n = mesh.corner_normals.empty() ? n_g : mesh.corner_normals[t][k];
-      corner_data[3 * t + k] = {{p.x(), p.y(), p.z(), 0}, {n.x(), n.y(), n.z(), 0}};
+      // The UV rides in the w components for the camera pass's texel lookup (resample_masks.h).
+      const Vec2f uv = mesh.corner_uvs.empty() ? Vec2f::Zero() : mesh.corner_uvs[t][k];
+      corner_data[3 * t + k] = {{p.x(), p.y(), p.z(), uv.x()}, {n.x(), n.y(), n.z(), uv.y()}};
       box.extend(p.cast<double>());
     }
   }
@@ -225,17 +232,32 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
   const TexelAtlas& a = *atlas;
   texel_count = uint32_t(a.TexelCount());
   std::vector<sh::MaskTexel> texel_data(texel_count);
+  const std::vector<float> sides = TexelSidesM(mesh, a);
   for (uint32_t t = 0; t < texel_count; ++t) {
     const Vec3f& p = a.position[t];
     const Vec3f& n = a.shading_normal[t];
     const Vec3f& g = a.geometric_normal[t];
     const Vec3f& tg = a.tangent[t];
-    texel_data[t] = {{p.x(), p.y(), p.z(), 0}, {n.x(), n.y(), n.z(), 0}, {g.x(), g.y(), g.z(), 0},
+    texel_data[t] = {{p.x(), p.y(), p.z(), sides[t]},
+                     {n.x(), n.y(), n.z(), 0},
+                     {g.x(), g.y(), g.z(), 0},
                      {tg.x(), tg.y(), tg.z(), 0}};
   }
   {
     REFLCAP_ASSIGN_OR_RETURN(Buffer b, gpu::CreateBufferFrom(c, texel_data));
     texels = std::make_unique<Buffer>(std::move(b));
+  }
+  // The camera pass writes the hit's texel index as a float (exact below 2^24).
+  if (texel_count >= (1u << 24)) {
+    return UnavailableError("Vulkan masks: ", texel_count, " texels exceed the camera map's 2^24");
+  }
+  if (uint64_t(a.texel_of_pixel.size()) * sizeof(int32_t) > max_range) {
+    return UnavailableError("Vulkan masks: the ", a.width, "x", a.height, " atlas exceeds the ",
+                            "device's storage-buffer range of ", max_range, " bytes");
+  }
+  {
+    REFLCAP_ASSIGN_OR_RETURN(Buffer b, gpu::CreateBufferFrom(c, a.texel_of_pixel));
+    texel_of_pixel = std::make_unique<Buffer>(std::move(b));
   }
   REFLCAP_RETURN_IF_ERROR(EnsureHostBuffer(c, &outcomes, uint64_t(texel_count) * sizeof(uint32_t)));
   REFLCAP_RETURN_IF_ERROR(
@@ -449,7 +471,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
                   float(camera.dist[3])};
   p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
   p.map_intrinsics = {float(grid->fx), float(grid->fy), float(grid->cx), float(grid->cy)};
-  p.map_intrinsics_extra = {float(grid->skew), 0, 0, 0};
+  p.map_intrinsics_extra = {float(grid->skew), float(m.atlas->width), float(m.atlas->height), 0};
   p.light = point_light ? V4(light_in_object, 1) : V4(light_dir_in_object, 0);
   p.intensity = V4(light.intensity, image.exposure_s);
   const double photon = m.noise.photon_sigma_at_1, read = m.noise.read_sigma;
@@ -463,7 +485,10 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
                             float(kDarkSigmas), float(kInvalidSigmas)};
   p.flags = (pinhole ? sh::kMaskFlagPinhole : 0u) | (point_light ? sh::kMaskFlagPointLight : 0u) |
             (pinhole && camera.HasDistortion() ? sh::kMaskFlagDistortion : 0u) |
-            (m.options.sample_point == SamplePoint::kPixel ? sh::kMaskFlagPixelSample : 0u);
+            (m.options.sample_point == SamplePoint::kPixel ? sh::kMaskFlagPixelSample : 0u) |
+            (m.options.pixel_filter.value_or(camera.pixel_filter) == PixelFilter::kPoint
+                 ? sh::kMaskFlagPointPixels
+                 : 0u);
   p.width = uint32_t(w);
   p.height = uint32_t(h);
   p.map_width = uint32_t(pinhole ? grid->width : w);
@@ -519,6 +544,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   m.camera_set.WriteBuffer(kBindParams, *m.params);
   m.camera_set.WriteBuffer(kBindCorners, *m.corners);
   m.camera_set.WriteBuffer(kBindTriangles, *m.triangle_normals);
+  m.camera_set.WriteBuffer(kBindTexelOfPixel, *m.texel_of_pixel);
   m.camera_set.WriteImage(kBindLightMap, m.light_pass.depth().array_view(), m.sampler.handle(),
                           kRead);
   const Buffer& rays = pinhole ? *grid->rays : *m.no_rays;

@@ -41,6 +41,7 @@
 // (as ImageResampler). Not thread-safe: one object per thread.
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "acquire/resample/image_resampler.h"
@@ -80,6 +81,8 @@ struct VulkanMaskOptions {
   uint32_t max_chunk_texels = 0;
   // Where each texel's sample is measured, as ImageResampler::SetSamplePoint (image_resampler.h).
   SamplePoint sample_point = SamplePoint::kPixel;
+  // What the cameras' pixels measure, as ImageResampler::SetPixelFilter (nullopt: each camera's).
+  std::optional<PixelFilter> pixel_filter;
 
   Status Validate() const;
 };

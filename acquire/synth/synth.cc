@@ -329,6 +329,10 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
   for (int c = 0; c < num_cameras; ++c) {
     cam_elevations.push_back(Spread(c, num_cameras, 10, 70));
     capture.cameras.push_back(ArcCamera(StrCat("cam", c), cam_elevations.back(), centre, image_size, focal));
+    // One ray per pixel centre: each pixel is a point sample (camera.h); --supersample N
+    // averages N x N rays over the pixel, an area filter.
+    capture.cameras.back().pixel_filter =
+        options.supersampling == 1 ? PixelFilter::kPoint : PixelFilter::kArea;
   }
   static const double kLightElevations[3] = {20, 50, 75};
   for (int l = 0; l < num_lights; ++l) {

@@ -156,6 +156,7 @@ py::dict CaptureDict(const Capture& capture) {
     c["R"] = Mat3(cam.cam_from_world.rotation);  // cam_from_world: p_cam = R p_world + t
     c["t"] = Vec3(cam.cam_from_world.translation);
     c["pixel_size_m"] = cam.pixel_size_m;
+    c["pixel_filter"] = PixelFilterName(cam.pixel_filter);
     cameras.append(c);
   }
   d["cameras"] = cameras;
@@ -746,8 +747,9 @@ PYBIND11_MODULE(reflcap, m) {
   m.def("read_capture", &ReadCaptureDict, py::arg("path"),
         "Reads and validates capture.json (a path to it or its folder) into a dict: path, folder, "
         "mesh (absolute path or None), normal_map, cameras (id, model, width, height, K 3x3, dist, "
-        "R, t = cam_from_world, pixel_size_m), lights (id, type, position, direction, intensity), "
-        "turntable (axis, point or None), images (file, camera, light, turntable_deg, exposure_s, "
+        "R, t = cam_from_world, pixel_size_m, pixel_filter), lights (id, type, position, "
+        "direction, intensity), turntable (axis, point or None), images (file, camera, light, "
+        "turntable_deg, exposure_s, "
         "split, saturation, variance), ground_truth (dict or None).");
   m.def("load_image", &LoadImage, py::arg("capture"), py::arg("index"),
         "Photograph `index` of a capture (a read_capture dict or a path) as an H x W x 3 float32 "

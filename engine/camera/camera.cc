@@ -5,6 +5,10 @@
 
 namespace reflcap {
 
+const char* PixelFilterName(PixelFilter filter) {
+  return filter == PixelFilter::kPoint ? "point" : "area";
+}
+
 bool Camera::HasDistortion() const {
   for (double d : dist) {
     if (d != 0.0) return true;

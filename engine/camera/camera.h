@@ -9,6 +9,13 @@
 //   (u, v) = (fx x_d + s y_d + cx, fy y_d + cy)   with K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]].
 // Orthographic: every pixel looks along +z; (u, v) = (X / pixel_size_m + cx, Y / pixel_size_m + cy)
 //   with (cx, cy) the image centre ((width-1)/2, (height-1)/2). K is absent in the file.
+//
+// Pixel filter (capture/1 `pixel_filter`, optional): what one pixel value measures. "area" (the
+// default): radiance integrated over the pixel's footprint, as every sensor and every filtered
+// renderer (Cycles' 1.5 px Blackman–Harris, a box over sub-pixel rays) gives it. "point": the
+// radiance along the one ray through the pixel centre, as a renderer shooting one ray per pixel
+// (`reflcap synth` without --supersample) gives it — each such pixel sees exactly one surface
+// point, so the resampler can tell which texel a pixel measured.
 #include <array>
 #include <string>
 
@@ -18,6 +25,8 @@
 namespace reflcap {
 
 enum class CameraModel { kPinhole, kOrthographic };
+enum class PixelFilter { kArea, kPoint };
+const char* PixelFilterName(PixelFilter filter);  // "area", "point"
 
 struct Camera {
   std::string id;
@@ -28,6 +37,7 @@ struct Camera {
   std::array<double, 5> dist{};          // k1, k2, p1, p2, k3 (OpenCV order); zeros when none
   Rigid3 cam_from_world;
   double pixel_size_m = 0;               // orthographic: metres per pixel (0 = not given)
+  PixelFilter pixel_filter = PixelFilter::kArea;
 
   bool HasDistortion() const;
   // Camera centre (pinhole) in the world frame.

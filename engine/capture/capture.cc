@@ -87,6 +87,17 @@ StatusOr<Camera> ParseCamera(const FieldReader& r, const Json& j, const std::str
       return r.Error(at + ".dist", "orthographic cameras take no distortion");
     }
   }
+  if (auto it = j.find("pixel_filter"); it != j.end()) {
+    REFLCAP_ASSIGN_OR_RETURN(const std::string filter, r.String(*it, at + ".pixel_filter"));
+    if (filter == "area") {
+      cam.pixel_filter = PixelFilter::kArea;
+    } else if (filter == "point") {
+      cam.pixel_filter = PixelFilter::kPoint;
+    } else {
+      return r.Error(at + ".pixel_filter", StrCat("unknown pixel filter \"", filter,
+                                                  "\" (expected \"area\" or \"point\")"));
+    }
+  }
   REFLCAP_ASSIGN_OR_RETURN(const Json* m, r.Required(j, at, "cam_from_world"));
   REFLCAP_ASSIGN_OR_RETURN(Mat4d mat, (r.Matrix(*m, 4, 4, at + ".cam_from_world")));
   if ((mat.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 0) {
@@ -518,6 +529,10 @@ std::string CaptureToJson(const Capture& capture) {
       j["dist"] = OutJson(std::vector<double>(cam.dist.begin(), cam.dist.end()));
     }
     j["cam_from_world"] = MatrixJson(cam.cam_from_world.ToMatrix());
+    // Written only when not the default, so area-filtered captures keep their files unchanged.
+    if (cam.pixel_filter != PixelFilter::kArea) {
+      j["pixel_filter"] = PixelFilterName(cam.pixel_filter);
+    }
     cameras.push_back(j);
   }
   root["cameras"] = cameras;

@@ -390,6 +390,44 @@ void TexelAtlas::PixelOfUv(float u, float v, int* x, int* y) const {
   *y = pixel(1.0f - v, height);
 }
 
+int TexelAtlas::TexelUnderUv(const Vec2f& uv) const {
+  int x, y;
+  PixelOfUv(uv.x(), uv.y(), &x, &y);
+  int t = TexelAt(x, y);
+  if (t >= 0) return t;
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int nx = x + dx, ny = y + dy;
+      if (nx < 0 || ny < 0 || nx >= width || ny >= height) continue;
+      if ((t = TexelAt(nx, ny)) >= 0) return t;
+    }
+  }
+  return -1;
+}
+
+std::vector<float> TexelSidesM(const TriangleMesh& mesh, const TexelAtlas& atlas) {
+  std::vector<float> per_triangle(mesh.TriangleCount(), 0.0f);
+  const double pixels = double(atlas.width) * double(atlas.height);
+  for (size_t t = 0; t < mesh.TriangleCount() && !mesh.corner_uvs.empty(); ++t) {
+    const auto& v = mesh.triangles[t];
+    const Vec3d a = mesh.positions[v[0]].cast<double>(), b = mesh.positions[v[1]].cast<double>(),
+                c = mesh.positions[v[2]].cast<double>();
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    const auto& uv = mesh.corner_uvs[t];
+    const Vec2d e1 = (uv[1] - uv[0]).cast<double>(), e2 = (uv[2] - uv[0]).cast<double>();
+    const double area_uv = 0.5 * std::abs(e1.x() * e2.y() - e1.y() * e2.x());
+    if (area_uv > 0 && std::isfinite(area / area_uv)) {
+      per_triangle[t] = float(std::sqrt(area / area_uv / pixels));
+    }
+  }
+  std::vector<float> sides(atlas.TexelCount(), 0.0f);
+  for (size_t i = 0; i < sides.size(); ++i) {
+    const int32_t t = i < atlas.triangle.size() ? atlas.triangle[i] : -1;
+    if (t >= 0 && size_t(t) < per_triangle.size()) sides[i] = per_triangle[size_t(t)];
+  }
+  return sides;
+}
+
 StatusOr<TexelAtlas> BuildTexelAtlas(const TriangleMesh& mesh, int width, int height) {
   REFLCAP_RETURN_IF_ERROR(CheckInputs(mesh, width, height, "BuildTexelAtlas"));
   TexelAtlas atlas;

@@ -57,6 +57,12 @@ struct TexelAtlas {
   // Atlas pixel containing UV (u, v), clamped to the layout: x = floor(u W + kTexelTieOffset),
   // y = floor((1 - v) H + kTexelTieOffset) in float; non-finite coordinates map to 0.
   void PixelOfUv(float u, float v, int* x, int* y) const;
+  // The texel whose parameters shade a surface point at UV `uv` (the renderers' lookup, which
+  // the resampler mirrors to tell which texel a pixel saw): the atlas pixel under it.
+  // Conservative coverage guarantees one for UVs inside a triangle; rounding at a chart border
+  // can land one pixel off, so the 3x3 neighbourhood is searched (rows, then columns) before
+  // giving up (-1).
+  int TexelUnderUv(const Vec2f& uv) const;
 };
 
 // Rasterises mesh's UV layout at width x height (each >= 1, width * height < 2^31; else
@@ -73,6 +79,13 @@ StatusOr<TexelAtlas> BuildTexelAtlas(const TriangleMesh& mesh, int width, int he
 // are 0 (orthographic, directional lights: position is unused), geometric normal = shading
 // normal, tangent frame from the normal alone (Duff et al. 2017), triangle = -1.
 StatusOr<TexelAtlas> BuildNormalMapAtlas(const Image& normals, const Image& mask);
+
+// Per texel of a mesh atlas, the side of its atlas pixel on the surface in metres:
+// sqrt(3D area / UV area / (width * height)) of its triangle, the texel's size if the
+// parameterisation is conformal. 0 for a texel without a triangle (normal-map atlases) or one on a
+// triangle of zero UV area. The resampler compares it with the pixel footprint (float, so the CPU
+// and Vulkan paths compare the same value).
+std::vector<float> TexelSidesM(const TriangleMesh& mesh, const TexelAtlas& atlas);
 
 // Counts the texels BuildTexelAtlas would produce (same coverage, no per-texel data kept), for
 // `reflcap info`. Same errors as BuildTexelAtlas.

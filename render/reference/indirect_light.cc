@@ -35,7 +35,7 @@ int32_t TexelOfRayHit(const RayScene& scene, const TexelAtlas& atlas, const RayH
   if (mesh.GeometricNormal(hit.triangle).dot(dir) >= 0) return -1;
   const auto& cuv = mesh.corner_uvs[hit.triangle];
   const Vec2f uv = (1 - hit.b1 - hit.b2) * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
-  return TexelUnderUv(atlas, uv);
+  return atlas.TexelUnderUv(uv);
 }
 
 bool SendsLight(const brdf::BrdfParams& p) {

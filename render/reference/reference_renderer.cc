@@ -38,21 +38,6 @@ Status RenderOptions::Validate() const {
   return OkStatus();
 }
 
-int TexelUnderUv(const TexelAtlas& atlas, const Vec2f& uv) {
-  int x, y;
-  atlas.PixelOfUv(uv.x(), uv.y(), &x, &y);
-  int t = atlas.TexelAt(x, y);
-  if (t >= 0) return t;
-  for (int dy = -1; dy <= 1; ++dy) {
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int nx = x + dx, ny = y + dy;
-      if (nx < 0 || ny < 0 || nx >= atlas.width || ny >= atlas.height) continue;
-      if ((t = atlas.TexelAt(nx, ny)) >= 0) return t;
-    }
-  }
-  return -1;
-}
-
 StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& camera,
                                    const Light& light, const Rigid3& world_from_object,
                                    double exposure_s, const RenderOptions& options) {
@@ -123,7 +108,7 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& came
     }
     const auto& cuv = mesh.corner_uvs[hit.triangle];
     const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
-    const int texel = TexelUnderUv(atlas, uv);
+    const int texel = atlas.TexelUnderUv(uv);
     if (texel < 0) return true;
     // The texel's tangent frame, re-orthogonalised against the normal at the hit.
     Vec3f t = atlas.tangent[texel] - n_s * n_s.dot(atlas.tangent[texel]);

@@ -102,11 +102,6 @@ std::vector<float> NormalMapCurvature(const TexelAtlas& atlas, const Camera& cam
 // orthographic normal map, where a pixel spans an unbounded stretch of surface.
 constexpr double kMinNormalMapCos = 0.1;
 
-// Texel whose parameters shade a hit at `uv`: the atlas pixel under it. Conservative atlas coverage
-// guarantees one for UVs inside a triangle; rounding at a chart border can land one pixel off, so
-// the 3x3 neighbourhood is searched before giving up (-1).
-int TexelUnderUv(const TexelAtlas& atlas, const Vec2f& uv);
-
 StatusOr<RenderResult> RenderImage(const ShadedScene& scene, const Camera& camera,
                                    const Light& light, const Rigid3& world_from_object,
                                    double exposure_s, const RenderOptions& options);

@@ -8,20 +8,24 @@
 // keeps the nearest surface, as the CPU's first hit.
 //
 // Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[] (vertex stage), 2 = triangle normals,
-// 3 = light map. Push constants: MaskDrawPush {view = kMaskCameraView}.
+// 3 = light map, 12 = the atlas's texel_of_pixel. Push constants: MaskDrawPush {view =
+// kMaskCameraView}.
 // Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, 0); location 1 (RGBA32F) = (the
-// hit's unit shading normal, 0), what SamplePoint::kPixel measures a sample with; the clear
-// value 0 = background.
+// hit's unit shading normal, the texel under its UV as a float, -1 = none), what
+// SamplePoint::kPixel measures a sample with and which texel it measured; the clear value 0 =
+// background.
 #extension GL_GOOGLE_include_directive : require
 
 #define REFLCAP_MASK_TRIANGLES
 #define REFLCAP_MASK_LIGHT_MAP
+#define REFLCAP_MASK_TEXEL_OF_PIXEL
 #include "resample/masks_common.glsl"
 
 layout(push_constant) uniform Push { MaskDrawPush push; };
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec2 in_uv;
 layout(location = 0) out vec4 out_map;
 layout(location = 1) out vec4 out_normal;
 
@@ -38,5 +42,5 @@ void main() {
   vec3 wi = ToLight(p, dist);
   bool lit = dot(n_s, wi) > 0.0 && dot(n_g, wi) > 0.0 && !LightShadowed(p, n_g);
   out_map = vec4(distance, lit ? 1.0 : 0.0, 1.0, 0.0);
-  out_normal = vec4(n_s, 0.0);
+  out_normal = vec4(n_s, float(MaskTexelUnderUv(in_uv)));
 }

@@ -8,10 +8,11 @@
 //   light grazing -> light map (shadowed) -> footprint: every tap's camera-map texel is a hit
 //   within the edge depth tolerance of the texel, and lit -> pixel values (invalid, clipped,
 //   invalid below the noise, dark) -> the BRDF sample. With kMaskFlagPixelSample
-//   (SamplePoint::kPixel) the sample is the tap whose hit lies nearest the texel centre, with the
-//   hit's position (its ray and camera-map distance), shading normal (the camera pass's second
-//   attachment), directions and light distance, as the CPU's; else the bilinear value at the
-//   texel centre's geometry.
+//   (SamplePoint::kPixel) the sample is the tap whose hit lies in the texel (the camera pass's
+//   second attachment's w) nearest its centre, else — kMaskFlagPointPixels, the texel resolved:
+//   kMaskEdgeTexel — the tap whose hit is nearest, with the hit's position (its ray and
+//   camera-map distance), shading normal (that attachment's xyz), directions and light
+//   distance, as the CPU's; else the bilinear value at the texel centre's geometry.
 // Loops: at most 4 taps x 3 channels (twice with a variance image) per invocation, far below
 // lavapipe's 65,535-step cut.
 //
@@ -263,8 +264,10 @@ void main() {
   // 6. Footprint: each tap's camera ray hits the texel's own, lit surface.
   float tolerance = params.tests.z * footprint * (1.0 + kSqrt2 * tan_v);
   uint outcome = kMaskKept;
-  // kMaskFlagPixelSample: the tap whose hit lies nearest the texel centre (ties: the first).
+  // kMaskFlagPixelSample: of the taps whose hit lies in the texel, the one nearest its centre;
+  // when there is none, the nearest of all (ties: the first).
   int nearest = -1;
+  bool nearest_inside = false;
   float nearest_d2 = 0.0;
   vec3 nearest_hit = vec3(0.0), nearest_dir = vec3(0.0);
   ivec2 nearest_map = ivec2(0);
@@ -286,8 +289,13 @@ void main() {
     vec3 hit = origin + m.x * dir;
     vec3 to_hit = hit - p;
     float d2 = dot(to_hit, to_hit);
-    if (nearest < 0 || d2 < nearest_d2) {
+    bool in_texel = (params.flags & kMaskFlagPixelSample) != 0u &&
+                    texelFetch(camera_normal_map, ivec3(t, 0), 0).w ==
+                        float(push.first_texel + local);
+    if (nearest < 0 || (in_texel && !nearest_inside) ||
+        (in_texel == nearest_inside && d2 < nearest_d2)) {
       nearest = k;
+      nearest_inside = in_texel;
       nearest_d2 = d2;
       nearest_hit = hit;
       nearest_dir = dir;
@@ -296,6 +304,12 @@ void main() {
   }
   if (outcome != kMaskKept) {
     outcomes[local] = outcome;
+    return;
+  }
+  if ((params.flags & kMaskFlagPixelSample) != 0u && !nearest_inside &&
+      (params.flags & kMaskFlagPointPixels) != 0u &&
+      tx.position.w * sqrt(cos_v) >= kMaskMinResolvedTexelPixels * footprint) {
+    outcomes[local] = kMaskEdgeTexel;  // every tap's pixel measured another texel
     return;
   }
   if ((params.flags & kMaskFlagPixelSample) != 0u) {

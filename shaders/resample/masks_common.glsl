@@ -5,8 +5,9 @@
 // (camera pass), 3 = light map (sampler2DArray of distances / scale), 4 = camera map
 // (sampler2DArray: distance, lit, hit), 5 = MaskTexel[], 6 = pixel rays (vec2 per photograph
 // pixel: undistorted normalised coordinates), 7 = photograph pixels (float RGB), 8 = outcomes,
-// 9 = MaskSample[], 10 = the photograph's variance image (float RGB; masks.comp). A pass declares
-// only what it reads (#define REFLCAP_MASK_* before including).
+// 9 = MaskSample[], 10 = the photograph's variance image (float RGB; masks.comp), 11 = camera
+// normal map, 12 = the atlas's texel_of_pixel (int per atlas pixel, -1 = none; camera pass). A
+// pass declares only what it reads (#define REFLCAP_MASK_* before including).
 //
 // Light-map test (LightShadowed): the GLSL twin of the Vulkan renderer's InShadow
 // (shaders/render/shading.glsl explains the receiver-plane depth and the slope-scaled bias): p is
@@ -33,6 +34,41 @@ layout(std430, set = 0, binding = 2) readonly buffer TriangleBuffer { vec4 trian
 #endif
 #ifdef REFLCAP_MASK_LIGHT_MAP
 layout(set = 0, binding = 3) uniform sampler2DArray light_map;
+#endif
+#ifdef REFLCAP_MASK_TEXEL_OF_PIXEL
+layout(std430, set = 0, binding = 12) readonly buffer TexelOfPixelBuffer { int texel_of_pixel[]; };
+
+// TexelAtlas::PixelOfUv with the atlas size in params.map_intrinsics_extra.yz, the C++'s float
+// operations in the same order (`precise`: no fused multiply-add; texel_atlas.h says why).
+const float kMaskTexelTieOffset = 1.0 / 300.0;
+ivec2 MaskPixelOfUv(vec2 uv, ivec2 size) {
+  precise float sx = uv.x * float(size.x);
+  precise float x = floor(sx + kMaskTexelTieOffset);
+  precise float one_minus_v = 1.0 - uv.y;
+  precise float sy = one_minus_v * float(size.y);
+  precise float y = floor(sy + kMaskTexelTieOffset);
+  x = clamp(x, 0.0, float(size.x - 1));
+  y = clamp(y, 0.0, float(size.y - 1));
+  return ivec2(int(x), int(y));
+}
+
+// TexelAtlas::TexelUnderUv: the texel under uv, else the first of its 3x3 neighbourhood (rows,
+// then columns); -1 when there is none.
+int MaskTexelUnderUv(vec2 uv) {
+  ivec2 size = ivec2(params.map_intrinsics_extra.yz);
+  ivec2 px = MaskPixelOfUv(uv, size);
+  int t = texel_of_pixel[px.y * size.x + px.x];
+  if (t >= 0) return t;
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      ivec2 q = px + ivec2(dx, dy);
+      if (q.x < 0 || q.y < 0 || q.x >= size.x || q.y >= size.y) continue;
+      t = texel_of_pixel[q.y * size.x + q.x];
+      if (t >= 0) return t;
+    }
+  }
+  return -1;
+}
 #endif
 #ifdef REFLCAP_MASK_CAMERA_MAP
 layout(set = 0, binding = 4) uniform sampler2DArray camera_map;

@@ -17,6 +17,12 @@ REFLCAP_CONST(uint, kMaskFlagPointLight, 2u);  // point light (else directional)
 REFLCAP_CONST(uint, kMaskFlagDistortion, 4u);  // the camera has lens distortion
 // SamplePoint::kPixel: the sample is the nearest tap's pixel with its hit's geometry.
 REFLCAP_CONST(uint, kMaskFlagPixelSample, 8u);
+// With kMaskFlagPixelSample: the camera's pixels are point samples (PixelFilter::kPoint), so a
+// texel whose taps all hit other texels is rejected (kMaskEdgeTexel) instead of taking the nearest.
+REFLCAP_CONST(uint, kMaskFlagPointPixels, 16u);
+// resample::kMinResolvedTexelPixels (image_resampler.h): the smallest texel, in pixels, whose
+// missing in-texel tap rejects it under kMaskFlagPointPixels (static_assert in vulkan_masks.cc).
+REFLCAP_CONST(float, kMaskMinResolvedTexelPixels, 0.5);
 // Most light-map views: a cube map's six faces.
 REFLCAP_CONST(uint, kMaskMaxLightViews, 6u);
 // MaskDrawPush::view of the camera pass (light views are 0 .. num_light_views - 1).
@@ -37,6 +43,7 @@ REFLCAP_CONST(uint, kMaskEdgeShadow, 7u);
 REFLCAP_CONST(uint, kMaskInvalid, 8u);
 REFLCAP_CONST(uint, kMaskClipped, 9u);
 REFLCAP_CONST(uint, kMaskDark, 10u);
+REFLCAP_CONST(uint, kMaskEdgeTexel, 11u);
 
 // The light map holds one LightMapView (light_map_view.h) per layer: the light's perspective
 // projection (point light: a cube face, or one frustum fitted to the object) or an orthographic
@@ -54,7 +61,9 @@ struct MaskParams {
   vec4 distortion;                  // k1, k2, p1, p2
   vec4 distortion_extra;            // x: k3; yzw: unused
   vec4 map_intrinsics;              // fx, fy, cx, cy of the camera map (pinhole)
-  vec4 map_intrinsics_extra;        // x: skew of the camera map; yzw: unused
+  vec4 map_intrinsics_extra;        // x: skew of the camera map; y, z: the texel atlas's width
+                                    // and height (TexelUnderUv; exact as floats below 2^24);
+                                    // w: unused
   vec4 light;                       // xyz: light position (point) or unit direction to it
   vec4 intensity;                   // rgb: radiant intensity; w: exposure_s
   vec4 noise;                       // photon_sigma_at_1², read_sigma², dark floor, invalid floor
@@ -85,14 +94,15 @@ REFLCAP_STD430_SIZE(MaskParams, 416 + 6 * 128);
 
 // One triangle corner, de-indexed (corner c of triangle t at 3 t + c).
 struct MaskCorner {
-  vec4 position;  // xyz: object frame (m); w: unused
-  vec4 normal;    // xyz: unit shading normal of the corner; w: unused
+  vec4 position;  // xyz: object frame (m); w: the corner's u
+  vec4 normal;    // xyz: unit shading normal of the corner; w: the corner's v
 };
 REFLCAP_STD430_SIZE(MaskCorner, 32);
 
 // One texel of the atlas (TexelAtlas's arrays, interleaved).
 struct MaskTexel {
-  vec4 position;          // xyz: object frame (m)
+  vec4 position;          // xyz: object frame (m); w: the texel's side on the surface (m,
+                          // TexelSidesM)
   vec4 shading_normal;    // xyz: unit
   vec4 geometric_normal;  // xyz: unit
   vec4 tangent;           // xyz: unit

@@ -93,6 +93,7 @@ def test_read_capture_and_load_image(data):
     assert cam["K"].shape == (3, 3) and cam["K"][2, 2] == 1.0
     assert (cam["width"], cam["height"]) == (SIZE, SIZE)
     assert cam["R"].shape == (3, 3) and cam["t"].shape == (3,)
+    assert cam["pixel_filter"] == "point"  # reflcap synth: one ray per pixel centre
     assert {im["split"] for im in cap["images"]} == {"train", "holdout"}
     assert pathlib.Path(cap["mesh"]).is_file()
     assert set(cap["images"][0]) >= {"file", "camera", "light", "turntable_deg", "split"}

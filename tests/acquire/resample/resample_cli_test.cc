@@ -84,6 +84,24 @@ TEST(ResampleCli, WritesAStoreReportAndMaps) {
       nlohmann::json::parse(ReadTextFile(texel / "resample_report.json").value());
   EXPECT_EQ(texel_report["sample_point"], "texel");
   EXPECT_GT(texel_report["samples_kept"].get<int>(), 0);
+  // The synth's cameras declare point pixels; --pixel-filter area overrides them, is recorded,
+  // and measures the pairs whose pixels all hit other texels at the nearest one instead.
+  EXPECT_EQ(report["pixel_filter"]["cameras"]["cam0"], "point");
+  const uint64_t rejected = report["samples_rejected_detail"]["edge_other_texel"].get<uint64_t>();
+  EXPECT_GT(rejected, 0u);
+  const fs::path area = dir / "area";
+  r = RunCli("resample --quiet " + TinyCapture().string() + " --out " + area.string() +
+                 " --pixel-filter area",
+             dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto area_report =
+      nlohmann::json::parse(ReadTextFile(area / "resample_report.json").value());
+  EXPECT_EQ(area_report["pixel_filter"]["cameras"]["cam0"], "area");
+  EXPECT_EQ(area_report["samples_rejected_detail"]["edge_other_texel"].get<uint64_t>(), 0u);
+  // Those pairs then meet the nearest hit's own grazing and pixel tests, so not all are kept.
+  EXPECT_GT(area_report["samples_kept"].get<uint64_t>(), report["samples_kept"].get<uint64_t>());
+  EXPECT_LE(area_report["samples_kept"].get<uint64_t>(),
+            report["samples_kept"].get<uint64_t>() + rejected);
 }
 
 TEST(ResampleCli, MissingCaptureExitsTwoNamingIt) {
@@ -130,7 +148,7 @@ TEST(ResampleCli, BadOptionsAreUsageErrors) {
   for (const std::string bad : {" --min-cos 1.5", " --min-cos -0.1", " --min-cos banana",
                                  " --split test", " --backend cuda", " --atlas-res -3",
                                  " --read-sigma -2", " --frobnicate", " --sample-point centre",
-                                 " --sample-point"}) {
+                                 " --sample-point", " --pixel-filter gaussian"}) {
     CliResult r = RunCli(base + bad, dir);
     EXPECT_EQ(r.exit_code, 1) << bad << ": " << r.err;
     EXPECT_FALSE(r.err.empty()) << bad;

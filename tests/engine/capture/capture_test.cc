@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "engine/core/atomic_file.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
 #include "tests/engine/capture/raw_exr.h"
@@ -260,6 +261,26 @@ TEST_F(CaptureFixture, MissingRequiredFieldIsNamed) {
 TEST_F(CaptureFixture, NonRotationPoseIsRejected) {
   json_["cameras"][0]["cam_from_world"][0][0] = 2;
   ExpectError({"cameras[0].cam_from_world", "rotation"});
+}
+
+// cameras[].pixel_filter: optional, "area" when absent, read back as written; anything else is
+// named with its field.
+TEST_F(CaptureFixture, PixelFilterIsReadWrittenAndChecked) {
+  json_["cameras"][1]["pixel_filter"] = "point";
+  ASSERT_TRUE(WriteAndValidate().ok());
+  auto c = ReadCapture(path());
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_EQ(c->cameras[0].pixel_filter, PixelFilter::kArea);
+  EXPECT_EQ(c->cameras[1].pixel_filter, PixelFilter::kPoint);
+  const fs::path copy = dir_ / "copy.json";
+  ASSERT_TRUE(WriteCapture(*c, copy).ok());
+  const Json written = Json::parse(*ReadTextFile(copy));
+  EXPECT_FALSE(written["cameras"][0].contains("pixel_filter")) << "the default is not written";
+  EXPECT_EQ(written["cameras"][1]["pixel_filter"], "point");
+  json_["cameras"][1]["pixel_filter"] = "gaussian";
+  ExpectError({"cameras[1].pixel_filter", "gaussian"});
+  json_["cameras"][1]["pixel_filter"] = 3;
+  ExpectError({"cameras[1].pixel_filter"});
 }
 
 TEST_F(CaptureFixture, UnknownSplitAndLightType) {

@@ -121,6 +121,35 @@ TEST(BuildTexelAtlas, UnitSquareHasExactlyOneTexelPerPixel) {
   }
 }
 
+// The texel's side on the surface: a 3 m x 3 m square mapped onto the UV square at 12 x 12 has
+// 0.25 m texels; a chart using half the UV range in u for the same square (non-conformal: 0.5 x
+// 0.25 m texels) gives their geometric mean; a texel's UV lookup finds the texel itself.
+TEST(TexelSidesM, IsTheTexelsSideOnTheSurface) {
+  TriangleMesh mesh = UnitSquare();
+  for (Vec3f& p : mesh.positions) p *= 3.0f;
+  StatusOr<TexelAtlas> atlas = BuildTexelAtlas(mesh, 12, 12);
+  ASSERT_TRUE(atlas.ok());
+  std::vector<float> sides = TexelSidesM(mesh, *atlas);
+  ASSERT_EQ(sides.size(), atlas->TexelCount());
+  for (float s : sides) EXPECT_NEAR(s, 0.25f, 1e-6f);
+  for (size_t t = 0; t < atlas->TexelCount(); ++t) {
+    int x, y;
+    atlas->PixelOf(t, &x, &y);
+    const Vec2f centre((x + 0.5f) / 12.0f, 1.0f - (y + 0.5f) / 12.0f);
+    EXPECT_EQ(atlas->TexelUnderUv(centre), int(t));
+  }
+  for (auto& tri : mesh.corner_uvs) {
+    for (Vec2f& uv : tri) uv.x() *= 0.5f;
+  }
+  atlas = BuildTexelAtlas(mesh, 12, 12);
+  ASSERT_TRUE(atlas.ok());
+  sides = TexelSidesM(mesh, *atlas);
+  for (float s : sides) EXPECT_NEAR(s, std::sqrt(0.5f * 0.25f), 1e-6f);
+  // UVs beyond the chart find the nearest texel of the 3x3 neighbourhood, then none.
+  EXPECT_GE(atlas->TexelUnderUv(Vec2f(0.5f + 0.5f / 12.0f, 0.5f)), 0);
+  EXPECT_EQ(atlas->TexelUnderUv(Vec2f(0.9f, 0.5f)), -1);
+}
+
 TEST(BuildTexelAtlas, TexelPositionIsThePlanarMapOfThePixelCentre) {
   const int width = 64, height = 40;  // non-square on purpose
   StatusOr<TexelAtlas> atlas = BuildTexelAtlas(UnitSquare(), width, height);
