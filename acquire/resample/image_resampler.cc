@@ -712,8 +712,10 @@ void ImageResampler::CastPixels(const Frame& f, const std::vector<uint32_t>& pix
       const float b1 = hits[i].b1, b2 = hits[i].b2;
       const Vec3f n_s = ((1 - b1 - b2) * cn[0] + b1 * cn[1] + b2 * cn[2]).normalized();
       hit_normal[i] = n_s;
-      const auto& cuv = mesh.corner_uvs[tri];
-      hit_texel[i] = atlas_->TexelUnderUv((1 - b1 - b2) * cuv[0] + b1 * cuv[1] + b2 * cuv[2]);
+      if (f.map_texel != nullptr) {
+        const auto& cuv = mesh.corner_uvs[tri];
+        hit_texel[i] = atlas_->TexelUnderUv((1 - b1 - b2) * cuv[0] + b1 * cuv[1] + b2 * cuv[2]);
+      }
       const Vec3f& n_g = triangle_normals_[tri];
       Vec3f wi;
       float dist;
