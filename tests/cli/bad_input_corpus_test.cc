@@ -589,6 +589,17 @@ TEST(BadInputCorpus, RunAndBench) {
          return "run " + Q(json) + " --out " + Q(w / "out");
        },
        kBadInput, {"capture.json", "cameras[1].id"}},
+      {"run: a camera's pixel_filter neither area nor point",
+       [](const fs::path& w) {
+         const fs::path json = EditedCapture(w, [](Json& j, const fs::path&) {
+           j["cameras"][1]["pixel_filter"] = "gaussian";
+         });
+         return "run " + Q(json) + " --out " + Q(w / "out");
+       },
+       kBadInput, {"capture.json", "cameras[1].pixel_filter", "gaussian"}},
+      {"run: --pixel-filter banana", [](const fs::path& w) {
+         return "run " + Q(TinyCapture()) + " --out " + Q(w / "out") + " --pixel-filter banana"; },
+       kUsage, {"--pixel-filter"}},
       {"run: output under /proc",
        [](const fs::path&) { return "run --quiet " + Q(TinyCapture()) + " --out /proc/reflcap_corpus_run"; },
        kBadInput, {"reflcap_corpus_run", "cannot create folder"}},
