@@ -73,8 +73,9 @@ int RunResample(int argc, char** argv) {
   args.AddString("pixel-filter", &pixel_filter, "capture|area|point",
                  "with --sample-point pixel: what a photograph's pixel measures — its footprint's "
                  "radiance (area: a texel whose pixels all hit other texels takes the nearest) or "
-                 "the ray through its centre (point: such a pair is rejected, as edge); default "
-                 "capture: each camera's cameras[].pixel_filter, area when absent");
+                 "the ray through its centre (point: such a pair is rejected, as edge, when the "
+                 "texel spans >= 0.5 px); default capture: each camera's cameras[].pixel_filter, "
+                 "area when absent");
   int chunk_texels = int(options.chunk_texels);
   args.AddInt("chunk-texels", &chunk_texels,
               StrCat("texels per chunk file, >= 1 (default ", resample::kDefaultChunkTexels,

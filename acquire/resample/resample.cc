@@ -163,7 +163,8 @@ Json PixelFilterReport(const Capture& capture, const ResampleOptions& options, b
           {"definition", "area: a pixel integrates its footprint, so a texel whose four pixels "
                          "all hit other texels takes the one hitting nearest its centre; point: "
                          "a pixel is the ray through its centre, so such a pair is rejected "
-                         "(edge_other_texel)"}};
+                         "(edge_other_texel) when the texel spans >= 0.5 px in the view, else "
+                         "takes the nearest too"}};
 }
 
 }  // namespace

@@ -73,7 +73,9 @@ std::string Camera::ToString() const {
   } else {
     out << ", pixel_size_m=" << pixel_size_m;
   }
-  if (pixel_filter != PixelFilter::kArea) out << ", " << PixelFilterName(pixel_filter) << " pixels";
+  if (pixel_filter != PixelFilter::kArea) {
+    out << ", " << PixelFilterName(pixel_filter) << " pixels";
+  }
   out << ")";
   return out.str();
 }
