@@ -617,10 +617,9 @@ void ImageResampler::ProcessMeshBlock(const Frame& f, const Image& pixels, const
     }
     // A point camera's texel that no tap's hit lies in, which this view resolves: each of those
     // pixels measured another texel (kEdgeTexel); an unresolved one keeps the nearest.
-    const bool resolved =
-        texel_sides_m_[c.texel] * std::sqrt(c.cos_v) >= kMinResolvedTexelPixels * float(footprint);
     if (outcome == Outcome::kKept && sample_point_ == SamplePoint::kPixel && !nearest_inside &&
-        f.point_pixels && resolved) {
+        f.point_pixels &&
+        texel_sides_m_[c.texel] * std::sqrt(c.cos_v) >= kMinResolvedTexelPixels * float(footprint)) {
       outcome = Outcome::kEdgeTexel;
     }
     if (outcome != Outcome::kKept) {

@@ -32,8 +32,8 @@ namespace reflcap {
 // split such ties by rounding noise. Shifted by a non-dyadic 1/300 texel, the tie lies where no
 // float lands exactly, far beyond that noise (a UV times 16,384 texels keeps ~2^-10 of a
 // texel); the shift itself is invisible. The arithmetic is float, in this order, as in its GLSL
-// twin (shaders/render/shading.glsl, `precise`: no fused multiply-add), so equal UVs give equal
-// texels on every device.
+// twin (shaders/common/texel_atlas.glsl, `precise`: no fused multiply-add), so equal UVs give
+// equal texels on every device.
 constexpr float kTexelTieOffset = 1.0f / 300.0f;
 
 struct TexelAtlas {

@@ -35,6 +35,7 @@
 #include "render/material.glsl"
 #include "render/render_inputs.glsl"
 #include "common/light_map.glsl"
+#include "common/texel_atlas.glsl"
 
 // Eigen's unitOrthogonal() for a 3-vector (float: isMuchSmallerThan at 1e-5), which the CPU
 // renderer uses when a texel's tangent is parallel to the shading normal.
@@ -44,21 +45,6 @@ vec3 UnitOrthogonal(vec3 v) {
     return vec3(-v.y, v.x, 0.0) / length(v.xy);
   }
   return vec3(0.0, -v.z, v.y) / length(v.yz);
-}
-
-// TexelAtlas::PixelOfUv: x = floor(u W + kTexelTieOffset), y = floor((1 - v) H +
-// kTexelTieOffset), clamped to the layout, with the C++'s float operations in the same order
-// (`precise`: no fused multiply-add; engine/mesh/texel_atlas.h says why).
-const float kTexelTieOffset = 1.0 / 300.0;
-ivec2 PixelOfUv(vec2 uv) {
-  precise float sx = uv.x * float(params.atlas_width);
-  precise float x = floor(sx + kTexelTieOffset);
-  precise float one_minus_v = 1.0 - uv.y;
-  precise float sy = one_minus_v * float(params.atlas_height);
-  precise float y = floor(sy + kTexelTieOffset);
-  x = clamp(x, 0.0, float(params.atlas_width - 1u));
-  y = clamp(y, 0.0, float(params.atlas_height - 1u));
-  return ivec2(int(x), int(y));
 }
 
 bool IsTexel(ivec2 px) {
@@ -71,7 +57,7 @@ bool IsTexel(ivec2 px) {
 // The reference renderer's TexelOfHit: the atlas pixel under `uv`, else the first texel of its
 // 3x3 neighbourhood (rows, then columns, as the CPU searches). False when there is none.
 bool TexelOfHit(vec2 uv, out ivec2 texel) {
-  ivec2 px = PixelOfUv(uv);
+  ivec2 px = AtlasPixelOfUv(uv, uvec2(params.atlas_width, params.atlas_height));
   texel = px;
   if (IsTexel(px)) return true;
   for (int dy = -1; dy <= 1; ++dy) {

@@ -36,27 +36,16 @@ layout(std430, set = 0, binding = 2) readonly buffer TriangleBuffer { vec4 trian
 layout(set = 0, binding = 3) uniform sampler2DArray light_map;
 #endif
 #ifdef REFLCAP_MASK_TEXEL_OF_PIXEL
-layout(std430, set = 0, binding = 12) readonly buffer TexelOfPixelBuffer { int texel_of_pixel[]; };
+#include "common/texel_atlas.glsl"
 
-// TexelAtlas::PixelOfUv with the atlas size in params.map_intrinsics_extra.yz, the C++'s float
-// operations in the same order (`precise`: no fused multiply-add; texel_atlas.h says why).
-const float kMaskTexelTieOffset = 1.0 / 300.0;
-ivec2 MaskPixelOfUv(vec2 uv, ivec2 size) {
-  precise float sx = uv.x * float(size.x);
-  precise float x = floor(sx + kMaskTexelTieOffset);
-  precise float one_minus_v = 1.0 - uv.y;
-  precise float sy = one_minus_v * float(size.y);
-  precise float y = floor(sy + kMaskTexelTieOffset);
-  x = clamp(x, 0.0, float(size.x - 1));
-  y = clamp(y, 0.0, float(size.y - 1));
-  return ivec2(int(x), int(y));
-}
+layout(std430, set = 0, binding = 12) readonly buffer TexelOfPixelBuffer { int texel_of_pixel[]; };
 
 // TexelAtlas::TexelUnderUv: the texel under uv, else the first of its 3x3 neighbourhood (rows,
 // then columns); -1 when there is none.
 int MaskTexelUnderUv(vec2 uv) {
+  // The atlas size rides in params.map_intrinsics_extra.yz (resample_masks.h).
   ivec2 size = ivec2(params.map_intrinsics_extra.yz);
-  ivec2 px = MaskPixelOfUv(uv, size);
+  ivec2 px = AtlasPixelOfUv(uv, uvec2(size));
   int t = texel_of_pixel[px.y * size.x + px.x];
   if (t >= 0) return t;
   for (int dy = -1; dy <= 1; ++dy) {
@@ -72,7 +61,8 @@ int MaskTexelUnderUv(vec2 uv) {
 #endif
 #ifdef REFLCAP_MASK_CAMERA_MAP
 layout(set = 0, binding = 4) uniform sampler2DArray camera_map;
-// The camera pass's second attachment: the hit's unit shading normal (xyz), 0 = background.
+// The camera pass's second attachment: the hit's unit shading normal (xyz) and the texel under
+// its UV (w, a float; -1 = none); 0 = background.
 layout(set = 0, binding = 11) uniform sampler2DArray camera_normal_map;
 #endif
 
