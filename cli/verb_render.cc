@@ -55,7 +55,8 @@ int RunRender(int argc, char** argv) {
                "normal-map captures: no cast shadows from the height field integrated from the "
                "normal map (mesh captures keep theirs)");
   args.AddString("indirect", &indirect, "MODE",
-                 "interreflection, mesh captures: auto (default: added when the train "
+                 "light not straight from the lamp: interreflection (mesh captures) or the "
+                 "room's stray light (normal-map captures); auto (default: added when the train "
                  "photographs show light where no direct light reaches), on or off");
   args.AddInt("indirect-bounces", &indirect_bounces, "bounces of interreflection, 1..8 (default 2)");
   args.AddInt("indirect-rays", &indirect_rays,

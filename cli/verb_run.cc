@@ -190,8 +190,9 @@ int RunRun(int argc, char** argv) {
                "normal map, neither rejecting train samples nor in the holdout renders");
   std::string indirect = "auto";
   args.AddString("indirect", &indirect, "MODE",
-                 "holdout render's interreflection: auto (default: when the train photographs "
-                 "show light where no direct light reaches), on or off");
+                 "light not straight from the lamp: interreflection (mesh captures) or the "
+                 "room's stray light (normal-map captures); auto (default: added when the train "
+                 "photographs show light where no direct light reaches), on or off");
   args.AddInt("indirect-bounces", &options.indirect_bounces,
               "bounces of interreflection, 1..8 (default 2)");
   args.AddInt("indirect-rays", &options.indirect_rays,

@@ -22,6 +22,8 @@
 #include "engine/mesh/mesh_io.h"
 #include "engine/core/worker_pool.h"
 #include "engine/texel/sample_store.h"
+#include "render/reference/evidence_photos.h"
+#include "render/reference/stray_light.h"
 
 namespace reflcap::render {
 namespace fs = std::filesystem;
@@ -56,53 +58,6 @@ constexpr int kPixelEvidenceImages = 8;
 // The evidence's box render: 2 x 2 stratified rays already average over the pixel (the
 // difference to the point sample is what is measured; kAutoBoxSupersampling refines the average).
 constexpr int kPixelEvidenceSupersampling = 2;
-
-// The train photographs an evidence reads: up to `count`, evenly spaced over the split.
-std::vector<size_t> EvidenceImages(const Capture& capture, int count) {
-  std::vector<size_t> pool;
-  for (size_t i = 0; i < capture.images.size(); ++i) {
-    if (capture.images[i].split == Split::kTrain) pool.push_back(i);
-  }
-  const size_t take = std::min(pool.size(), size_t(count));
-  std::vector<size_t> out;
-  for (size_t j = 0; j < take; ++j) out.push_back(pool[j * pool.size() / take]);
-  return out;
-}
-
-// Photograph `index` for an evidence, once its renders went well (`rendered`): an evidence is
-// advice on photographs that are not rendered, so one that cannot be rendered or read, or whose
-// size is not its camera's, is left out with a warning naming it (`what` names the evidence) —
-// a selected photograph reports its own error.
-StatusOr<Image> ReadEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
-                                       const char* what) {
-  const CaptureImage& image = capture.images[index];
-  const Camera& camera = capture.cameras[image.camera];
-  StatusOr<Image> read =
-      rendered.ok() ? ReadImageRgb(capture.Resolve(image.file)) : StatusOr<Image>(rendered);
-  Status problem = read.status();
-  if (problem.ok() && (read->width != camera.width || read->height != camera.height)) {
-    problem = InvalidArgumentError(capture.Resolve(image.file).string(), ": ", read->width, "x",
-                                   read->height, " pixels, but camera \"", camera.id, "\" is ",
-                                   camera.width, "x", camera.height);
-  }
-  if (!problem.ok()) {
-    REFLCAP_LOG(kWarning) << "render: " << what << " leaves out images[" << index
-                          << "]: " << problem.message();
-    return problem;
-  }
-  return read;
-}
-
-// An evidence reads a photograph pixel only when every channel is finite and below the image's
-// saturation (a clipped value says nothing of the radiance).
-bool UsablePixel(const float* p, const CaptureImage& image) {
-  for (int c = 0; c < 3; ++c) {
-    if (!std::isfinite(p[c]) || (image.saturation > 0 && double(p[c]) >= image.saturation)) {
-      return false;
-    }
-  }
-  return true;
-}
 
 }  // namespace
 
@@ -411,10 +366,7 @@ StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCaptur
                                                               const CaptureRenderOptions& options,
                                                               Json* report) {
   *report = {{"mode", IndirectModeName(options.indirect)}, {"used", false}};
-  if (fitted.normal_map) {
-    (*report)["why_not"] = "a normal-map capture has no surface to bounce light from";
-    return std::unique_ptr<IndirectLight>();
-  }
+  REFLCAP_CHECK(!fitted.normal_map) << "normal-map captures: PrepareStrayLight";
   if (options.indirect == IndirectMode::kOff) return std::unique_ptr<IndirectLight>();
   if (options.indirect == IndirectMode::kAuto) {
     const auto start = std::chrono::steady_clock::now();
@@ -455,6 +407,41 @@ StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCaptur
                        << " bounces, " << options.indirect_rays << " rays per texel)";
   }
   return std::make_unique<IndirectLight>(std::move(table));
+}
+
+// Normal-map captures' light from the room (stray_light.h) when the render adds it (null
+// otherwise), and what decided it for render_report.json `indirect`.
+std::unique_ptr<StrayLight> PrepareStrayLight(const FittedCapture& fitted,
+                                              const CaptureRenderOptions& options, Json* report) {
+  *report = {{"mode", IndirectModeName(options.indirect)},
+             {"used", false},
+             {"kind", "stray_light"}};
+  if (options.indirect == IndirectMode::kOff) return nullptr;
+  auto stray = std::make_unique<StrayLight>(EstimateStrayLight(fitted, options.cast_shadows));
+  (*report)["evidence"] = {{"images", stray->images},
+                           {"skipped_images", stray->skipped},
+                           {"observations", stray->observations},
+                           {"error_reduction", stray->error_reduction},
+                           {"min_observations", kMinStrayEvidenceObservations},
+                           {"min_error_reduction", kMinStrayErrorReduction},
+                           {"seconds", stray->seconds}};
+  REFLCAP_LOG(kInfo) << "render: stray light " << (stray->shows || options.indirect ==
+                                                    IndirectMode::kOn ? "on" : "off")
+                     << " (" << IndirectModeName(options.indirect)
+                     << "; where no direct light reaches, it changes the held-out train "
+                        "photographs' squared error by "
+                     << std::lround(-100 * stray->error_reduction) << " %)";
+  if (options.indirect == IndirectMode::kAuto && !stray->shows) {
+    (*report)["why_not"] = "the train photographs show no light where the lamp does not reach";
+    return nullptr;
+  }
+  (*report)["used"] = true;
+  (*report)["observed_texels"] = stray->observed_texels;
+  (*report)["modelled_texels"] = stray->modelled_texels;
+  Json environment = Json::array();
+  for (const auto& e : stray->environment) environment.push_back({e[0], e[1], e[2], e[3]});
+  (*report)["environment"] = environment;
+  return stray;
 }
 
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
@@ -523,9 +510,15 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   }
   pixel_report["supersampling"] = render_options.supersampling;
   // Interreflection: the gather table, and (auto) whether the photographs show it.
+  // For normal maps, the light of the room instead (no surface to bounce from).
   Json indirect_report;
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<IndirectLight> indirect,
-                           PrepareIndirectLight(*fitted, options, &indirect_report));
+  std::unique_ptr<IndirectLight> indirect;
+  std::unique_ptr<StrayLight> stray;
+  if (fitted->normal_map) {
+    stray = PrepareStrayLight(*fitted, options, &indirect_report);
+  } else {
+    REFLCAP_ASSIGN_OR_RETURN(indirect, PrepareIndirectLight(*fitted, options, &indirect_report));
+  }
   summary.num_lobes = fitted->maps.num_lobes;
   if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
   // Every output folder exists before the writers start (they run concurrently).
@@ -580,6 +573,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         AddIndirectLight(*fitted, *indirect, selected[k], options.indirect_bounces,
                          options.cast_shadows, render_options.supersampling, &r.pixels);
       }
+      if (stray != nullptr) AddStrayLight(*fitted, *stray, selected[k], &r.pixels);
       const auto now = std::chrono::steady_clock::now();
       timings[k].render_s = std::chrono::duration<double>(now - last_delivery).count();
       last_delivery = now;

@@ -28,6 +28,11 @@ constexpr double kMinSuzanneLobeGainDb = 1.0;
 // 512²); the run is deterministic, so the margin is not noise. 2 dB: a prediction that
 // is wrong in level or place (a broken table, a missed bounce) falls below it.
 constexpr double kMinSuzanneIndirectGainDb = 2.0;
+// Stray light (--indirect auto on a normal-map capture): ball16's side away from each lamp reads
+// 1–4 % of the image's white in the photographs and 0 in a direct-light render; adding the
+// room's light estimated from the train photographs raised the holdout PSNR-L 28.65 -> 32.78 dB.
+// 2 dB (half of that) fails an estimate that is wrong in level or place; the run is deterministic.
+constexpr double kMinBallStrayGainDb = 2.0;
 
 nlohmann::json Overall(const fs::path& run) {
   std::ifstream in(run / "report" / "metrics.json");
@@ -37,6 +42,21 @@ nlohmann::json Overall(const fs::path& run) {
 
 testing::CliResult RunCli(const std::string& args, const testing::ScratchDir& dir) {
   return testing::RunCommand(REFLCAP_BINARY, args, dir);
+}
+
+// Holdout PSNR-L of `fit` rendered with `--indirect off` (direct light only), validated.
+double PsnrLWithoutIndirect(const std::string& capture, const fs::path& fit,
+                            const testing::ScratchDir& dir) {
+  const fs::path off = dir / "off", off_report = dir / "off_report";
+  auto r = RunCli("render " + capture + " " + fit.string() + " --out " + off.string() +
+                      " --indirect off --quiet", dir);
+  REFLCAP_CHECK(r.exit_code == 0) << r.err;
+  r = RunCli("validate " + capture + " " + off.string() + " --out " + off_report.string() +
+                 " --quiet", dir);
+  REFLCAP_CHECK(r.exit_code == 0) << r.err;
+  std::ifstream in(off_report / "metrics.json");
+  REFLCAP_CHECK(in.good()) << off_report;
+  return nlohmann::json::parse(in)["overall"]["psnr_l_db"].get<double>();
 }
 
 TEST(HeldOutRealData, SuzanneLafortuneBeatsLambertOnHoldoutPsnr) {
@@ -80,19 +100,34 @@ TEST(HeldOutRealData, SuzanneShowsInterreflectionAndItsRenderPredictsTheDarkPixe
   std::ifstream in(run / "renders" / "render_report.json");
   const auto indirect = nlohmann::json::parse(in)["indirect"];
   EXPECT_EQ(indirect["used"], true) << indirect.dump();
-  const fs::path off = dir / "off", off_report = dir / "off_report";
-  r = RunCli("render " + capture + " " + (run / "fit").string() + " --out " + off.string() +
-                 " --indirect off --quiet", dir);
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = RunCli("validate " + capture + " " + off.string() + " --out " + off_report.string() +
-                 " --quiet", dir);
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  std::ifstream off_in(off_report / "metrics.json");
   const double with = Overall(run)["psnr_l_db"].get<double>();
-  const double without = nlohmann::json::parse(off_in)["overall"]["psnr_l_db"].get<double>();
+  const double without = PsnrLWithoutIndirect(capture, run / "fit", dir);
   std::printf("suzanne (128^2 atlas) holdout PSNR-L: with interreflection %.2f dB, direct light "
               "only %.2f dB (evidence: %s)\n", with, without, indirect["evidence"].dump().c_str());
   EXPECT_GT(with, without + kMinSuzanneIndirectGainDb);
+}
+
+TEST(HeldOutRealData, DiligentBallShowsStrayLightAndItsRenderPredictsTheUnlitSide) {
+  const auto shared = testing::SharedDataDir();
+  if (!shared || !fs::is_directory(*shared / "diligent" / "ball16")) {
+    GTEST_SKIP() << "../shared/data/diligent/ball16 is absent: skipping the stray-light test";
+  }
+  testing::ScratchDir dir;
+  const fs::path capture = dir / "ball16", run = dir / "run";
+  auto r = RunCli("import-diligent --quiet " + (*shared / "diligent" / "ball16").string() +
+                      " --out " + capture.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("run --quiet --backend cpu " + capture.string() + " --out " + run.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream in(run / "renders" / "render_report.json");
+  const auto indirect = nlohmann::json::parse(in)["indirect"];
+  EXPECT_EQ(indirect["kind"], "stray_light") << indirect.dump();
+  EXPECT_EQ(indirect["used"], true) << indirect.dump();
+  const double with = Overall(run)["psnr_l_db"].get<double>();
+  const double without = PsnrLWithoutIndirect(capture.string(), run / "fit", dir);
+  std::printf("ball16 holdout PSNR-L: with stray light %.2f dB, direct light only %.2f dB "
+              "(evidence: %s)\n", with, without, indirect["evidence"].dump().c_str());
+  EXPECT_GT(with, without + kMinBallStrayGainDb);
 }
 
 TEST(HeldOutRealData, DiligentLafortuneBeatsLambertOnHoldoutRelativeRmse) {

@@ -1,0 +1,224 @@
+// Stray light of normal-map captures (render/reference/stray_light.h): the estimate from the
+// train photographs, its evidence, and the render that adds it.
+#include "render/reference/stray_light.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include <nlohmann/json.hpp>
+
+#include "engine/capture/capture.h"
+#include "engine/core/atomic_file.h"
+#include "engine/image/exr_io.h"
+#include "engine/image/png_io.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/brdf_maps.h"
+#include "render/reference/render_capture.h"
+#include "tests/support/height_scenes.h"
+#include "tests/support/test_support.h"
+
+namespace reflcap::render {
+namespace {
+namespace fs = std::filesystem;
+
+// The room's light in the synthetic photographs: s_c(t) = ρ_c(t) · (e_c · (1, n)), positive for
+// every unit normal (the constant exceeds the linear terms' norm), so the environment model of
+// stray_light.h holds exactly and both of its estimates can be checked against the truth.
+constexpr double kEnvironment[3][4] = {{0.060, 0.010, -0.020, 0.020},
+                                       {0.050, -0.015, 0.010, 0.015},
+                                       {0.040, 0.005, 0.015, -0.010}};
+// Photograph noise (standard deviation, in the photographs' units; lit pixels read ~0.1). The
+// faintest stray value, w · s = 0.4 (lamp × exposure) × 0.3 (albedo) × 0.021 (the environment's
+// minimum) = 0.0025, then has 0.8 % noise per observation.
+constexpr double kNoise = 2e-5;
+// A texel's own estimate: least squares over ≥ 2 observations of ≤ 0.8 % noise each — 5 % is
+// more than 6σ of the faintest texel's.
+constexpr double kOwnRelTolerance = 0.05;
+// The environment model: fitted over ~1000 texels' own estimates, so their noise averages out;
+// what is left is the ridge (1e-6, negligible). 1 %.
+constexpr double kModelRelTolerance = 0.01;
+
+double StrayTruth(const brdf::BrdfParams& p, const Vec3f& n, int c) {
+  const double* e = kEnvironment[c];
+  return p.rho_d[size_t(c)] * (e[0] + e[1] * n.x() + e[2] * n.y() + e[3] * n.z());
+}
+
+struct BallCapture {
+  testing::ScratchDir dir;
+  Capture capture;
+  TexelAtlas atlas;
+  BrdfMaps maps;
+  fs::path params;
+};
+
+// A textured Lambertian sphere cap (normals up to 75° from the view) under 12 directional lights
+// of elevations 5–40° around it, every third held out: each light leaves the cap's far side
+// unlit, and the texels near its centre face every light (the environment model's). The
+// photographs are direct-light renders of the known albedo plus, with `stray`, exposure · I · s,
+// plus noise.
+void MakeBallCapture(BallCapture* b, bool stray) {
+  const int w = 64, h = 60;
+  Image normals, mask;
+  testing::NormalMapOf(testing::SphereCap(31.5, 29.5, 28, 27), w, h, &normals, &mask);
+  auto atlas = BuildNormalMapAtlas(normals, mask);
+  ASSERT_TRUE(atlas.ok());
+  b->atlas = std::move(*atlas);
+  Capture& capture = b->capture;
+  capture.json_path = b->dir / "capture.json";
+  capture.normal_map = NormalMapGeometry{0, "normals.exr", "mask.png"};
+  capture.cameras.push_back(testing::DiligentCamera(w, h));
+  b->maps.texels.resize(b->atlas.TexelCount());
+  for (size_t t = 0; t < b->atlas.TexelCount(); ++t) {
+    int x, y;
+    b->atlas.PixelOf(t, &x, &y);
+    const float stripe = ((x / 5 + y / 7) % 2) ? 0.25f : 0.0f;
+    b->maps.texels[t].rho_d = {0.35f + stripe, 0.45f, 0.55f - stripe};
+  }
+  b->params = b->dir / "fit/params.exr";
+  fs::create_directories(b->dir / "fit");
+  ASSERT_TRUE(WriteBrdfMaps(b->params, b->maps, b->atlas).ok());
+  fs::create_directories(b->dir / "images");
+  for (int l = 0; l < 12; ++l) {
+    Light light;
+    light.id = StrCat("L", l);
+    light.type = LightType::kDirectional;
+    const double az = DegToRad(30.0 * l), el = DegToRad(5 + 35.0 * (l % 4) / 3);
+    light.direction = Vec3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+    light.intensity = Vec3d(0.8 + 0.05 * l, 1.0, 1.2 - 0.03 * l);
+    capture.lights.push_back(light);
+    CaptureImage image;
+    image.file = StrCat("images/", l, ".exr");
+    image.light = l;
+    image.exposure_s = 0.5 + 0.1 * (l % 3);
+    image.split = l % 3 == 2 ? Split::kHoldout : Split::kTrain;
+    capture.images.push_back(image);
+  }
+  ASSERT_TRUE(WriteExr(b->dir / "normals.exr", normals).ok());
+  ASSERT_TRUE(WritePng(b->dir / "mask.png", mask).ok());
+  ASSERT_TRUE(WriteCapture(capture, capture.json_path).ok());
+  // The photographs: the renderer's direct light (its own shadows) + stray light + noise.
+  auto fitted = LoadFittedCapture(capture, b->params);
+  ASSERT_TRUE(fitted.ok()) << fitted.status().ToString();
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, kNoise);
+  for (size_t i = 0; i < capture.images.size(); ++i) {
+    auto direct = RenderCaptureImage(**fitted, i, RenderOptions{});
+    ASSERT_TRUE(direct.ok()) << direct.status().ToString();
+    Image photo = direct->pixels;
+    const CaptureImage& image = capture.images[i];
+    const Vec3d lamp = image.exposure_s * capture.lights[image.light].intensity;
+    for (size_t t = 0; t < b->atlas.TexelCount(); ++t) {
+      int x, y;
+      b->atlas.PixelOf(t, &x, &y);
+      for (int c = 0; c < 3; ++c) {
+        const double s = stray ? StrayTruth(b->maps.texels[t], b->atlas.shading_normal[t], c) : 0;
+        photo.at(x, y, c) += float(lamp[c] * s + noise(rng));
+      }
+    }
+    ASSERT_TRUE(WriteExr(capture.Resolve(image.file), photo, ExrPixelType::kFloat).ok());
+  }
+}
+
+TEST(StrayLight, EstimatesEachTexelsOwnAndTheEnvironmentsLight) {
+  BallCapture b;
+  MakeBallCapture(&b, /*stray=*/true);
+  auto fitted = LoadFittedCapture(b.capture, b.params);
+  ASSERT_TRUE(fitted.ok());
+  const StrayLight stray = EstimateStrayLight(**fitted, true);
+  std::printf("stray light: %d images, %zu observations, %zu own, %zu modelled, error "
+              "reduction %.4f\n", stray.images, stray.observations, stray.observed_texels,
+              stray.modelled_texels, stray.error_reduction);
+  EXPECT_EQ(stray.images, 8);  // the train split
+  EXPECT_EQ(stray.skipped, 0);
+  ASSERT_GE(stray.observed_texels, size_t(500)) << "the scene leaves too few texels unlit";
+  ASSERT_GE(stray.modelled_texels, size_t(200)) << "every texel is unlit somewhere";
+  EXPECT_TRUE(stray.shows);
+  // Held-out folds: only the noise is left (1 % of each observation).
+  EXPECT_GT(stray.error_reduction, 0.98);
+  for (int c = 0; c < 3; ++c) {
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_NEAR(stray.environment[size_t(c)][size_t(k)], kEnvironment[c][k],
+                  kModelRelTolerance * kEnvironment[c][0])
+          << "channel " << c << ", term " << k;
+    }
+  }
+  double worst_own = 0, worst_model = 0;
+  for (size_t t = 0; t < b.atlas.TexelCount(); ++t) {
+    for (int c = 0; c < 3; ++c) {
+      const double truth = StrayTruth(b.maps.texels[t], b.atlas.shading_normal[t], c);
+      const double rel = std::abs(stray.per_intensity[t][c] - truth) / truth;
+      // A texel with its own estimate differs from the model's value by its noise; the
+      // modelled ones equal the model. Which is which is not reported per texel: the bound
+      // for the own estimates covers both.
+      worst_own = std::max(worst_own, rel);
+      const double* e = stray.environment[size_t(c)].data();
+      const Vec3f& n = b.atlas.shading_normal[t];
+      const double model = b.maps.texels[t].rho_d[size_t(c)] *
+                           (e[0] + e[1] * n.x() + e[2] * n.y() + e[3] * n.z());
+      if (std::abs(stray.per_intensity[t][c] - model) < 1e-7) {
+        worst_model = std::max(worst_model, rel);
+      }
+    }
+  }
+  std::printf("worst relative error: %.4f (any texel), %.4f (modelled)\n", worst_own,
+              worst_model);
+  EXPECT_LT(worst_own, kOwnRelTolerance);
+  EXPECT_LT(worst_model, kModelRelTolerance);
+}
+
+TEST(StrayLight, PhotographsWithoutItShowNone) {
+  BallCapture b;
+  MakeBallCapture(&b, /*stray=*/false);
+  auto fitted = LoadFittedCapture(b.capture, b.params);
+  ASSERT_TRUE(fitted.ok());
+  const StrayLight stray = EstimateStrayLight(**fitted, true);
+  std::printf("no stray light: %zu observations, error reduction %.4f\n", stray.observations,
+              stray.error_reduction);
+  EXPECT_GE(stray.observations, kMinStrayEvidenceObservations);
+  EXPECT_FALSE(stray.shows);
+  // Predicting noise about 0 from the other fold's noise removes none of it.
+  EXPECT_LT(stray.error_reduction, 0.05);
+}
+
+// `--indirect auto` adds the stray light when the photographs show it, and the holdout renders of
+// the true albedo then reproduce the held-out photographs to their noise; `off` leaves it out.
+TEST(StrayLight, TheRenderAddsItWhereThePhotographsShowIt) {
+  BallCapture b;
+  MakeBallCapture(&b, /*stray=*/true);
+  for (IndirectMode mode : {IndirectMode::kAuto, IndirectMode::kOff}) {
+    CaptureRenderOptions options;
+    options.indirect = mode;
+    const fs::path out = b.dir / StrCat("render_", IndirectModeName(mode));
+    ASSERT_TRUE(RenderCapture(b.capture, b.params, out, options).ok());
+    const auto report = nlohmann::json::parse(ReadTextFile(out / "render_report.json").value());
+    EXPECT_EQ(report["indirect"]["kind"], "stray_light");
+    EXPECT_EQ(report["indirect"]["used"], mode == IndirectMode::kAuto);
+    double worst = 0;
+    for (const CaptureImage& image : b.capture.images) {
+      if (image.split != Split::kHoldout) continue;
+      auto photo = ReadExrRgb(b.capture.Resolve(image.file));
+      auto rendered = ReadExrRgb(out / RenderPathFor(image.file));
+      ASSERT_TRUE(photo.ok() && rendered.ok());
+      for (size_t t = 0; t < b.atlas.TexelCount(); ++t) {
+        int x, y;
+        b.atlas.PixelOf(t, &x, &y);
+        for (int c = 0; c < 3; ++c) {
+          worst = std::max(worst, double(std::abs(photo->at(x, y, c) - rendered->at(x, y, c))));
+        }
+      }
+    }
+    std::printf("%s: worst held-out pixel error %.5f\n", IndirectModeName(mode), worst);
+    if (mode == IndirectMode::kAuto) {
+      // Noise (≤ 5σ over these pixels) plus the estimate's error (≤ 5 % of ≤ 0.05 · 1.3).
+      EXPECT_LT(worst, 5 * kNoise + kOwnRelTolerance * 0.05 * 1.3);
+    } else {
+      EXPECT_GT(worst, 0.02) << "without the stray light the renders miss it";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace reflcap::render
