@@ -25,6 +25,8 @@ struct PipelineOptions {
   int indirect_bounces = 2, indirect_rays = 64;
   // The holdout render's pixel model (--supersample N|auto; render::kAutoSupersampling = auto).
   int supersampling = render::kAutoSupersampling;
+  // Normal-map captures: the holdout render's point spread (--psf auto|none|SIGMA).
+  double psf_sigma_px = render::kAutoPsf;
   bool overwrite = false;
 };
 struct PipelineSummary {

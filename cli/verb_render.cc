@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
   int writers = 0, indirect_bounces = 2, indirect_rays = 64;
-  std::string indirect = "auto", supersample = "auto";
+  std::string indirect = "auto", supersample = "auto", psf = "auto";
   bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -48,6 +48,10 @@ int RunRender(int argc, char** argv) {
                  "N x N rays per pixel averaged over it (a box filter), 1..16, or auto (default): "
                  "4 x 4 when the train photographs integrate over their pixels, else 1 (the pixel "
                  "centre); mesh captures");
+  args.AddString("psf", &psf, "auto|none|SIGMA",
+                 "normal-map captures: the photographs' point spread, a Gaussian of SIGMA px "
+                 "(0..4) applied within the mask; auto (default: the train photographs decide) "
+                 "or none");
   args.AddFlag("no-shadows", &no_shadows,
                "no cast shadows: no shadow rays (mesh captures), no height-field shadows (normal "
                "maps)");
@@ -90,6 +94,8 @@ int RunRender(int argc, char** argv) {
   }
   const StatusOr<int> supersampling = render::ParseSupersampling(supersample, "--supersample");
   if (!supersampling.ok()) return usage(supersampling.status().message());
+  const StatusOr<double> psf_sigma = render::ParsePsf(psf, "--psf");
+  if (!psf_sigma.ok()) return usage(psf_sigma.status().message());
   if (writers < 0 || writers > 256) {
     return usage(StrCat("--writers must be in [0, 256], got ", writers));
   }
@@ -106,6 +112,7 @@ int RunRender(int argc, char** argv) {
   render::CaptureRenderOptions options;
   options.split = *selection;
   options.supersampling = *supersampling;
+  options.psf_sigma_px = *psf_sigma;
   options.cast_shadows = !no_shadows;
   options.height_shadows = !no_height_shadows;
   options.writers = writers;

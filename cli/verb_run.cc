@@ -108,6 +108,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   render_options.indirect_bounces = options.indirect_bounces;
   render_options.indirect_rays = options.indirect_rays;
   render_options.supersampling = options.supersampling;
+  render_options.psf_sigma_px = options.psf_sigma_px;
   bool rendered = false;
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER
   // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
@@ -176,6 +177,11 @@ int RunRun(int argc, char** argv) {
   args.AddString("supersample", &supersample, "N|auto",
                  "holdout render: N x N rays per pixel averaged over it, 1..16, or auto (default: "
                  "4 x 4 when the train photographs integrate over their pixels, else 1)");
+  std::string psf = "auto";
+  args.AddString("psf", &psf, "auto|none|SIGMA",
+                 "holdout render, normal-map captures: the photographs' point spread, a Gaussian "
+                 "of SIGMA px within the mask; auto (default: the train photographs decide) or "
+                 "none");
   std::string sample_point = "pixel";
   args.AddString("sample-point", &sample_point, "pixel|texel",
                  "resample: measure each texel at its nearest pixel's surface point (pixel, "
@@ -221,12 +227,13 @@ int RunRun(int argc, char** argv) {
     const auto filter = resample::ParsePixelFilter(pixel_filter);
     const auto supersampling = render::ParseSupersampling(supersample, "--supersample");
     const auto mode = render::ParseIndirectMode(indirect, "--indirect");
+    const auto psf_sigma = render::ParsePsf(psf, "--psf");
     // The render stage's ranges, checked before any stage runs.
     render::CaptureRenderOptions render_check;
     render_check.indirect_bounces = options.indirect_bounces;
     render_check.indirect_rays = options.indirect_rays;
     for (const Status& s : {point.status(), filter.status(), supersampling.status(),
-                            mode.status(), render_check.Validate()}) {
+                            mode.status(), psf_sigma.status(), render_check.Validate()}) {
       if (!s.ok()) {
         std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
         return kExitUsage;
@@ -236,6 +243,7 @@ int RunRun(int argc, char** argv) {
     options.resample.pixel_filter = *filter;
     options.supersampling = *supersampling;
     options.indirect = *mode;
+    options.psf_sigma_px = *psf_sigma;
   }
   if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
     std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());

@@ -94,6 +94,15 @@ constexpr int kAutoBoxSupersampling = 4;
 // "auto" -> kAutoSupersampling, "1".."16" -> N; anything else InvalidArgument naming `option`.
 StatusOr<int> ParseSupersampling(const std::string& text, const std::string& option);
 
+// Normal-map captures' point spread (point_spread.h), CaptureRenderOptions::psf_sigma_px: auto
+// decides it from the train photographs; 0 = sharp (each pixel its texel's shade).
+constexpr double kAutoPsf = -1.0;
+// Largest σ accepted (px): wider than any focused camera's spread; the blur's cost grows with it.
+constexpr double kMaxPsfSigmaPx = 4.0;
+// "auto" -> kAutoPsf, "none" -> 0, a number in [0, kMaxPsfSigmaPx] -> σ; anything else
+// InvalidArgument naming `option` (point_spread.cc).
+StatusOr<double> ParsePsf(const std::string& text, const std::string& option);
+
 struct CaptureRenderOptions {
   SplitSelection split = SplitSelection::kHoldout;
   // N x N samples per pixel, [1, kMaxSupersampling], or kAutoSupersampling (the default); mesh
@@ -109,6 +118,10 @@ struct CaptureRenderOptions {
   IndirectMode indirect = IndirectMode::kAuto;
   int indirect_bounces = 2;  // [1, kMaxIndirectBounces]
   int indirect_rays = 64;    // [1, kMaxIndirectRays]
+  // Normal-map captures: the photographs' point spread, a Gaussian of this standard deviation in
+  // pixels applied within the mask (point_spread.h); kAutoPsf or [0, kMaxPsfSigmaPx]. Mesh
+  // captures ignore it (their pixel model is `supersampling`).
+  double psf_sigma_px = kAutoPsf;
   // Threads writing the output files while later images render (EXR compression is most of a
   // GPU render's time); 0 = one per hardware thread. [0, 256].
   int writers = 0;

@@ -536,6 +536,10 @@ TEST(BadInputCorpus, RenderAndValidate) {
          return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
                 " --supersample 0"; },
        kUsage, {"--supersample"}},
+      {"render --psf 9", [&](const fs::path& w) {
+         return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
+                " --psf 9"; },
+       kUsage, {"--psf"}},
       {"render --split banana", [&](const fs::path& w) {
          return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
                 " --split banana"; },
@@ -600,6 +604,9 @@ TEST(BadInputCorpus, RunAndBench) {
       {"run: --pixel-filter banana", [](const fs::path& w) {
          return "run " + Q(TinyCapture()) + " --out " + Q(w / "out") + " --pixel-filter banana"; },
        kUsage, {"--pixel-filter"}},
+      {"run: --psf banana", [](const fs::path& w) {
+         return "run " + Q(TinyCapture()) + " --out " + Q(w / "out") + " --psf banana"; },
+       kUsage, {"--psf"}},
       {"run: output under /proc",
        [](const fs::path&) { return "run --quiet " + Q(TinyCapture()) + " --out /proc/reflcap_corpus_run"; },
        kBadInput, {"reflcap_corpus_run", "cannot create folder"}},

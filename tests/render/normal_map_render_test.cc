@@ -1,5 +1,7 @@
-// Stray light of normal-map captures (render/reference/stray_light.h): the estimate from the
-// train photographs, its evidence, and the render that adds it.
+// What the render adds to a normal-map capture's direct light: the room's stray light
+// (render/reference/stray_light.h) and the photographs' point spread (point_spread.h) — each
+// estimated from the train photographs, with its evidence, and the render that applies it.
+#include "render/reference/point_spread.h"
 #include "render/reference/stray_light.h"
 
 #include <gtest/gtest.h>
@@ -58,8 +60,8 @@ struct BallCapture {
 // of elevations 5–40° around it, every third held out: each light leaves the cap's far side
 // unlit, and the texels near its centre face every light (the environment model's). The
 // photographs are direct-light renders of the known albedo plus, with `stray`, exposure · I · s,
-// plus noise.
-void MakeBallCapture(BallCapture* b, bool stray) {
+// plus noise; with `psf_sigma_px` > 0 blurred by that point spread (before the noise).
+void MakeBallCapture(BallCapture* b, bool stray, double psf_sigma_px = 0) {
   const int w = 64, h = 60;
   Image normals, mask;
   testing::NormalMapOf(testing::SphereCap(31.5, 29.5, 28, 27), w, h, &normals, &mask);
@@ -110,13 +112,19 @@ void MakeBallCapture(BallCapture* b, bool stray) {
     Image photo = direct->pixels;
     const CaptureImage& image = capture.images[i];
     const Vec3d lamp = image.exposure_s * capture.lights[image.light].intensity;
-    for (size_t t = 0; t < b->atlas.TexelCount(); ++t) {
+    for (size_t t = 0; t < b->atlas.TexelCount() && stray; ++t) {
       int x, y;
       b->atlas.PixelOf(t, &x, &y);
       for (int c = 0; c < 3; ++c) {
-        const double s = stray ? StrayTruth(b->maps.texels[t], b->atlas.shading_normal[t], c) : 0;
-        photo.at(x, y, c) += float(lamp[c] * s + noise(rng));
+        photo.at(x, y, c) +=
+            float(lamp[c] * StrayTruth(b->maps.texels[t], b->atlas.shading_normal[t], c));
       }
+    }
+    if (psf_sigma_px > 0) BlurWithinMask(direct->mask, psf_sigma_px, &photo);
+    for (size_t t = 0; t < b->atlas.TexelCount(); ++t) {
+      int x, y;
+      b->atlas.PixelOf(t, &x, &y);
+      for (int c = 0; c < 3; ++c) photo.at(x, y, c) += float(noise(rng));
     }
     ASSERT_TRUE(WriteExr(capture.Resolve(image.file), photo, ExrPixelType::kFloat).ok());
   }
@@ -218,6 +226,87 @@ TEST(StrayLight, TheRenderAddsItWhereThePhotographsShowIt) {
       EXPECT_GT(worst, 0.02) << "without the stray light the renders miss it";
     }
   }
+}
+
+// Normalised convolution: a constant stays that constant inside the mask up to its border, and
+// nothing crosses the border either way.
+TEST(PointSpread, BlurKeepsAConstantAndLeaksNothingAcrossTheMask) {
+  const int w = 40, h = 30;
+  Image mask(w, h, 1, 0.0f), pixels(w, h, 3, 100.0f);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w / 2; ++x) {
+      mask.at(x, y) = 1;
+      for (int c = 0; c < 3; ++c) pixels.at(x, y, c) = 2.0f + float(c);
+    }
+  }
+  BlurWithinMask(mask, 1.3, &pixels);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) {
+        const float expected = x < w / 2 ? 2.0f + float(c) : 100.0f;
+        ASSERT_NEAR(pixels.at(x, y, c), expected, 1e-5) << x << "," << y;
+      }
+    }
+  }
+}
+
+// Inside a full mask the blur of one bright pixel is the Gaussian: neighbours in the ratio
+// exp(-d² / 2σ²) to the centre, and the light is conserved (the weights sum to 1 away from the
+// image's border).
+TEST(PointSpread, BlurOfAPointIsTheGaussian) {
+  const int w = 31, h = 31;
+  const double sigma = 0.7;
+  Image mask(w, h, 1, 1.0f), pixels(w, h, 1, 0.0f);
+  pixels.at(15, 15) = 1;
+  BlurWithinMask(mask, sigma, &pixels);
+  const double centre = pixels.at(15, 15);
+  EXPECT_NEAR(pixels.at(16, 15) / centre, std::exp(-1 / (2 * sigma * sigma)), 1e-6);
+  EXPECT_NEAR(pixels.at(16, 17) / centre, std::exp(-5 / (2 * sigma * sigma)), 1e-6);
+  EXPECT_EQ(pixels.at(15 + 4, 15), 0.0f) << "beyond 3 sigma (2.1 px -> 3 taps) nothing";
+  double sum = 0;
+  for (float v : pixels.data) sum += v;
+  EXPECT_NEAR(sum, 1.0, 1e-6);
+}
+
+// The auto decision finds the spread the photographs were made with (among the candidates) and
+// none in sharp photographs; the render then reproduces the held-out blurred photographs.
+TEST(PointSpread, TheEvidenceFindsThePhotographsSpread) {
+  constexpr double kTrueSigma = 0.7;  // one of kPsfCandidatesPx
+  BallCapture sharp, blurred;
+  MakeBallCapture(&sharp, /*stray=*/false);
+  MakeBallCapture(&blurred, /*stray=*/false, kTrueSigma);
+  auto sharp_fit = LoadFittedCapture(sharp.capture, sharp.params);
+  auto blurred_fit = LoadFittedCapture(blurred.capture, blurred.params);
+  ASSERT_TRUE(sharp_fit.ok() && blurred_fit.ok());
+  const PsfEvidence none = MeasurePsfEvidence(**sharp_fit, true, nullptr);
+  const PsfEvidence found = MeasurePsfEvidence(**blurred_fit, true, nullptr);
+  std::printf("sharp photographs: sigma %.2f, reduction %.4f; blurred (%.2f px): sigma %.2f, "
+              "reduction %.4f\n", none.sigma_px, none.reduction, kTrueSigma, found.sigma_px,
+              found.reduction);
+  EXPECT_EQ(none.sigma_px, 0.0);
+  EXPECT_LT(none.reduction, kMinPsfErrorReduction);
+  EXPECT_EQ(found.images, kPsfEvidenceImages);
+  EXPECT_EQ(found.sigma_px, kTrueSigma);
+  // What is left is the noise: the sharp render's error is the blur's (terminator, shadow edges).
+  EXPECT_GT(found.reduction, 0.9);
+
+  CaptureRenderOptions options;
+  ASSERT_TRUE(RenderCapture(blurred.capture, blurred.params, blurred.dir / "render", options).ok());
+  const auto report =
+      nlohmann::json::parse(ReadTextFile(blurred.dir / "render/render_report.json").value());
+  EXPECT_EQ(report["pixel_model"]["psf"]["sigma_px"], kTrueSigma);
+  double worst = 0;
+  for (const CaptureImage& image : blurred.capture.images) {
+    if (image.split != Split::kHoldout) continue;
+    auto photo = ReadExrRgb(blurred.capture.Resolve(image.file));
+    auto rendered = ReadExrRgb(blurred.dir / "render" / RenderPathFor(image.file));
+    ASSERT_TRUE(photo.ok() && rendered.ok());
+    for (size_t i = 0; i < photo->data.size(); ++i) {
+      worst = std::max(worst, double(std::abs(photo->data[i] - rendered->data[i])));
+    }
+  }
+  std::printf("worst held-out pixel error with the found spread: %.6f\n", worst);
+  EXPECT_LT(worst, 6 * kNoise);  // the photographs' noise only (6σ over ~10^4 values)
 }
 
 }  // namespace
