@@ -212,6 +212,9 @@ StatusOr<ImportSummary> ImportDiligent(const fs::path& object_dir, const fs::pat
     image.camera = 0;
     image.light = int(i);
     image.exposure_s = 1;
+    // The PNG's full scale (65535, or 255 in the 8-bit crops) is 1.0 here: a pixel at it is
+    // clipped (ball16's highlights are), so resampling drops it and validation does not score it.
+    image.saturation = kDiligentFullScale;
     image.split = light_number % options.holdout_every == 0 ? Split::kHoldout : Split::kTrain;
     capture.images.push_back(image);
   }
@@ -269,7 +272,8 @@ StatusOr<ImportSummary> ImportDiligent(const fs::path& object_dir, const fs::pat
       {"pixel_size_note", "nominal: DiLiGenT gives none; unused by directional lights and normal maps"},
       {"radiometry", "images keep DiLiGenT's linear values in units of the 16-bit full scale "
                      "(16-bit PNG / 65535; 8-bit crops: byte / 255 = (16-bit / 257) / 255); light "
-                     "intensities from light_intensities.txt; exposure_s = 1"},
+                     "intensities from light_intensities.txt; exposure_s = 1; saturation = 1 "
+                     "(the full scale: clipped)"},
       {"holdout_every", options.holdout_every},
       {"split_rule", "light i (1-based) is holdout when i % holdout_every == 0"},
       {"excluded_images", summary.excluded},

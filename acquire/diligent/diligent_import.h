@@ -42,6 +42,9 @@ namespace reflcap::diligent {
 constexpr int kDefaultHoldoutEvery = 4;
 // Metres per pixel of the orthographic camera: nominal (about a 0.1 m object over 500 px).
 constexpr double kNominalPixelSizeM = 2e-4;
+// The photographs' values are in units of their PNG's full scale, which is where the sensor (or
+// the 8-bit crop) clips: images[].saturation.
+constexpr double kDiligentFullScale = 1.0;
 // Light directions whose length differs from 1 by more than this are reported (then normalised):
 // the files give 4 decimals, so a correct direction is within ~1e-4 of unit length.
 constexpr double kDirectionLengthTolerance = 1e-2;

@@ -131,6 +131,8 @@ TEST(ImportDiligent, SyntheticObjectGivesACaptureThatInfoValidates) {
   EXPECT_EQ(capture->images[2].split, Split::kTrain);
   EXPECT_EQ(capture->images[0].file, "images/001.exr");
   EXPECT_EQ(capture->images[0].exposure_s, 1.0);
+  // The PNG's full scale clips: every photograph says so.
+  for (const CaptureImage& image : capture->images) EXPECT_EQ(image.saturation, 1.0);
 }
 
 TEST(ImportDiligent, RenderingTheKnownAlbedoReproducesTheImages) {
