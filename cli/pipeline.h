@@ -27,6 +27,9 @@ struct PipelineOptions {
   int supersampling = render::kAutoSupersampling;
   // Normal-map captures: the holdout render's point spread (--psf auto|none|SIGMA).
   double psf_sigma_px = render::kAutoPsf;
+  // Normal-map captures: the holdout render's height field (--height-field auto|ls|l1); the
+  // resample's shadow test keeps the least-squares one.
+  render::HeightFieldChoice height_field = render::HeightFieldChoice::kAuto;
   bool overwrite = false;
 };
 struct PipelineSummary {

@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
   int writers = 0, indirect_bounces = 2, indirect_rays = 64;
-  std::string indirect = "auto", supersample = "auto", psf = "auto";
+  std::string indirect = "auto", supersample = "auto", psf = "auto", height_field = "auto";
   bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -52,6 +52,10 @@ int RunRender(int argc, char** argv) {
                  "normal-map captures: the photographs' point spread, a Gaussian of SIGMA px "
                  "(0..4) applied within the mask; auto (default: the train photographs decide) "
                  "or none");
+  args.AddString("height-field", &height_field, "auto|ls|l1",
+                 "normal-map captures: the shadows' height field, integrated by least squares "
+                 "(ls) or by L1, which keeps depth steps sharp (l1); auto (default: the train "
+                 "photographs decide)");
   args.AddFlag("no-shadows", &no_shadows,
                "no cast shadows: no shadow rays (mesh captures), no height-field shadows (normal "
                "maps)");
@@ -96,6 +100,8 @@ int RunRender(int argc, char** argv) {
   if (!supersampling.ok()) return usage(supersampling.status().message());
   const StatusOr<double> psf_sigma = render::ParsePsf(psf, "--psf");
   if (!psf_sigma.ok()) return usage(psf_sigma.status().message());
+  const auto height_choice = render::ParseHeightFieldChoice(height_field, "--height-field");
+  if (!height_choice.ok()) return usage(height_choice.status().message());
   if (writers < 0 || writers > 256) {
     return usage(StrCat("--writers must be in [0, 256], got ", writers));
   }
@@ -113,6 +119,7 @@ int RunRender(int argc, char** argv) {
   options.split = *selection;
   options.supersampling = *supersampling;
   options.psf_sigma_px = *psf_sigma;
+  options.height_field = *height_choice;
   options.cast_shadows = !no_shadows;
   options.height_shadows = !no_height_shadows;
   options.writers = writers;

@@ -109,6 +109,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   render_options.indirect_rays = options.indirect_rays;
   render_options.supersampling = options.supersampling;
   render_options.psf_sigma_px = options.psf_sigma_px;
+  render_options.height_field = options.height_field;
   bool rendered = false;
 #ifdef REFLCAP_HAVE_VULKAN_RENDERER
   // After a Vulkan fit the holdout renders on the same device (issue 14.3): a GPU renders it
@@ -182,6 +183,11 @@ int RunRun(int argc, char** argv) {
                  "holdout render, normal-map captures: the photographs' point spread, a Gaussian "
                  "of SIGMA px within the mask; auto (default: the train photographs decide) or "
                  "none");
+  std::string height_field = "auto";
+  args.AddString("height-field", &height_field, "auto|ls|l1",
+                 "holdout render, normal-map captures: the shadows' height field, least squares "
+                 "(ls) or L1 (l1: depth steps stay sharp); auto (default: the train photographs "
+                 "decide); the resample's shadow test keeps least squares");
   std::string sample_point = "pixel";
   args.AddString("sample-point", &sample_point, "pixel|texel",
                  "resample: measure each texel at its nearest pixel's surface point (pixel, "
@@ -228,12 +234,14 @@ int RunRun(int argc, char** argv) {
     const auto supersampling = render::ParseSupersampling(supersample, "--supersample");
     const auto mode = render::ParseIndirectMode(indirect, "--indirect");
     const auto psf_sigma = render::ParsePsf(psf, "--psf");
+    const auto height_choice = render::ParseHeightFieldChoice(height_field, "--height-field");
     // The render stage's ranges, checked before any stage runs.
     render::CaptureRenderOptions render_check;
     render_check.indirect_bounces = options.indirect_bounces;
     render_check.indirect_rays = options.indirect_rays;
     for (const Status& s : {point.status(), filter.status(), supersampling.status(),
-                            mode.status(), psf_sigma.status(), render_check.Validate()}) {
+                            mode.status(), psf_sigma.status(), height_choice.status(),
+                            render_check.Validate()}) {
       if (!s.ok()) {
         std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
         return kExitUsage;
@@ -244,6 +252,7 @@ int RunRun(int argc, char** argv) {
     options.supersampling = *supersampling;
     options.indirect = *mode;
     options.psf_sigma_px = *psf_sigma;
+    options.height_field = *height_choice;
   }
   if (Status s = fit_flags.Apply(&options.fit); !s.ok()) {
     std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());

@@ -36,19 +36,38 @@ struct Equation {
 
 }  // namespace
 
+const char* HeightFieldIntegrationName(HeightFieldIntegration integration) {
+  return integration == HeightFieldIntegration::kL1 ? "l1" : "ls";
+}
+
 Status HeightFieldOptions::Validate() const {
   if (!(max_slope > 0) || !std::isfinite(max_slope)) {
     return InvalidArgumentError("HeightFieldOptions::max_slope must be finite and > 0, got ",
                                 max_slope);
   }
+  if (!(l1_epsilon_px > 0) || !std::isfinite(l1_epsilon_px)) {
+    return InvalidArgumentError("HeightFieldOptions::l1_epsilon_px must be finite and > 0, got ",
+                                l1_epsilon_px);
+  }
+  if (!(reweight_tolerance > 0) || max_reweights < 1) {
+    return InvalidArgumentError("HeightFieldOptions: reweight_tolerance must be > 0 and "
+                                "max_reweights >= 1, got ", reweight_tolerance, " and ",
+                                max_reweights);
+  }
   return OkStatus();
 }
 
 std::string HeightFieldStats::ToString() const {
+  std::string l1;
+  if (integration == HeightFieldIntegration::kL1) {
+    l1 = StrCat("; L1: ", reweights, " reweightings (last weight change ", weight_change, "), ",
+                discontinuities, " discontinuity equations");
+  }
   return StrCat(texels, " texels, ", components, " component(s), ", equations,
                 " gradient equations; residual rms ", rms_residual_px, " px, max ", max_residual_px,
                 " px; heights [", min_height_px, ", ", max_height_px, "] px; ", clamped,
-                " gradients clamped, ", backfacing, " back-facing normals; ", seconds, " s");
+                " gradients clamped, ", backfacing, " back-facing normals", l1, "; ", seconds,
+                " s");
 }
 
 StatusOr<HeightField> IntegrateNormalMap(const TexelAtlas& atlas, const Camera& camera,
@@ -129,42 +148,74 @@ StatusOr<HeightField> IntegrateNormalMap(const TexelAtlas& atlas, const Camera& 
   }
   stats.equations = equations.size();
 
-  // ---- Normal equations: graph Laplacian, one pinned texel per component ---------------------------
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(4 * equations.size() + n);
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(Eigen::Index(n));
-  for (const Equation& e : equations) {
-    triplets.emplace_back(e.a, e.a, 1.0);
-    triplets.emplace_back(e.b, e.b, 1.0);
-    triplets.emplace_back(e.a, e.b, -1.0);
-    triplets.emplace_back(e.b, e.a, -1.0);
-    rhs[e.b] += e.g;
-    rhs[e.a] -= e.g;
-  }
+  // ---- Normal equations: weighted graph Laplacian, one pinned texel per component ----------------
   std::vector<int> component(n);
+  std::vector<int> roots;
   for (size_t t = 0; t < n; ++t) {
     component[t] = Find(parent, int(t));
     if (component[t] == int(t)) {
-      // The penalty (h_t - 0)^2: the Laplacian's null space is one constant per component, and
-      // the least-squares objective does not change along it, so this fixes the constant and
-      // leaves the other heights the exact least-squares solution.
-      triplets.emplace_back(int(t), int(t), 1.0);
+      roots.push_back(int(t));
       ++stats.components;
     }
   }
+  stats.integration = options.integration;
   const Eigen::Index size = Eigen::Index(n);
-  Eigen::SparseMatrix<double> a(size, size);
-  a.setFromTriplets(triplets.begin(), triplets.end());
-  triplets.clear();
-  triplets.shrink_to_fit();
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(a);
-  if (solver.info() != Eigen::Success) {
-    return InternalError("IntegrateNormalMap: the sparse factorisation of ", n,
-                         " texels failed");
-  }
-  Eigen::VectorXd z = solver.solve(rhs);
-  if (solver.info() != Eigen::Success || !z.allFinite()) {
-    return InternalError("IntegrateNormalMap: the sparse solve of ", n, " texels failed");
+  std::vector<double> weight(equations.size(), 1.0);
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
+  Eigen::VectorXd z;
+  // Solves the weighted least squares; the pattern (Laplacian + pins) is the same every time.
+  auto solve = [&](bool first) -> Status {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(4 * equations.size() + roots.size());
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(size);
+    for (size_t k = 0; k < equations.size(); ++k) {
+      const Equation& e = equations[k];
+      const double wk = weight[k];
+      triplets.emplace_back(e.a, e.a, wk);
+      triplets.emplace_back(e.b, e.b, wk);
+      triplets.emplace_back(e.a, e.b, -wk);
+      triplets.emplace_back(e.b, e.a, -wk);
+      rhs[e.b] += wk * e.g;
+      rhs[e.a] -= wk * e.g;
+    }
+    // The penalty (h_t - 0)^2: the Laplacian's null space is one constant per component, and
+    // the objective does not change along it, so this fixes the constant and leaves the other
+    // heights the exact (weighted) least-squares solution.
+    for (int t : roots) triplets.emplace_back(t, t, 1.0);
+    Eigen::SparseMatrix<double> a(size, size);
+    a.setFromTriplets(triplets.begin(), triplets.end());
+    if (first) solver.analyzePattern(a);
+    solver.factorize(a);
+    if (solver.info() != Eigen::Success) {
+      return InternalError("IntegrateNormalMap: the sparse factorisation of ", n,
+                           " texels failed");
+    }
+    z = solver.solve(rhs);
+    if (solver.info() != Eigen::Success || !z.allFinite()) {
+      return InternalError("IntegrateNormalMap: the sparse solve of ", n, " texels failed");
+    }
+    return OkStatus();
+  };
+  REFLCAP_RETURN_IF_ERROR(solve(/*first=*/true));
+  if (options.integration == HeightFieldIntegration::kL1) {
+    const double eps = options.l1_epsilon_px;
+    for (int pass = 0; pass < options.max_reweights; ++pass) {
+      double change = 0;
+      for (size_t k = 0; k < equations.size(); ++k) {
+        const Equation& e = equations[k];
+        const double r = z[e.b] - z[e.a] - e.g;
+        // In (0, 1]: 1 for r = 0; the weight that makes r² w = the smoothed |r| at this r.
+        const double w = eps / std::sqrt(r * r + eps * eps);
+        change = std::max(change, std::abs(w - weight[k]));
+        weight[k] = w;
+      }
+      stats.weight_change = change;
+      if (change <= options.reweight_tolerance) break;
+      REFLCAP_RETURN_IF_ERROR(solve(/*first=*/false));
+      ++stats.reweights;
+    }
+    // Weight < 0.1 <=> |r| > √99 ε ≈ 10 ε: an equation the integration let go (a step).
+    for (double w : weight) stats.discontinuities += w < 0.1;
   }
 
   // ---- Each component's constant: mean boundary height 0 ---------------------------------------

@@ -82,6 +82,73 @@ StatusOr<int> ParseSupersampling(const std::string& text, const std::string& opt
   return int(n);
 }
 
+StatusOr<HeightFieldChoice> ParseHeightFieldChoice(const std::string& text,
+                                                   const std::string& option) {
+  if (text == "auto") return HeightFieldChoice::kAuto;
+  if (text == "ls") return HeightFieldChoice::kLeastSquares;
+  if (text == "l1") return HeightFieldChoice::kL1;
+  return InvalidArgumentError(option, ": \"", text, "\" is not one of auto, ls, l1");
+}
+
+const char* HeightFieldChoiceName(HeightFieldChoice choice) {
+  switch (choice) {
+    case HeightFieldChoice::kLeastSquares: return "ls";
+    case HeightFieldChoice::kL1: return "l1";
+    default: return "auto";
+  }
+}
+
+HeightFieldEvidence MeasureHeightFieldEvidence(const FittedCapture& fitted,
+                                               const HeightField& l1_field) {
+  REFLCAP_CHECK(fitted.normal_map && fitted.height_field != nullptr);
+  const Capture& capture = *fitted.capture;
+  HeightFieldEvidence evidence;
+  RenderOptions direct;
+  direct.aux_buffers = true;
+  for (const size_t index : EvidenceImages(capture, kHeightFieldEvidenceImages)) {
+    const CaptureImage& image = capture.images[index];
+    const Camera& camera = capture.cameras[image.camera];
+    const Light& light = capture.lights[image.light];
+    StatusOr<RenderResult> ls = RenderNormalMapImage(fitted.atlas, fitted.maps, camera, light,
+                                                     image.exposure_s, direct,
+                                                     fitted.height_field.get());
+    StatusOr<RenderResult> l1 =
+        ls.ok() ? RenderNormalMapImage(fitted.atlas, fitted.maps, camera, light, image.exposure_s,
+                                       direct, &l1_field)
+                : ls;
+    StatusOr<Image> read =
+        ReadEvidencePhotograph(capture, index, l1.status(), "height-field evidence");
+    if (!read.ok()) {
+      ++evidence.skipped;
+      continue;
+    }
+    for (int y = 0; y < camera.height; ++y) {
+      for (int x = 0; x < camera.width; ++x) {
+        if (!(ls->mask.at(x, y) > 0.5f)) continue;
+        const float* p = read->pixel(x, y);
+        if (!UsablePixel(p, image)) continue;
+        ++evidence.pixels;
+        // Only where the two fields' shadows differ: elsewhere the renders are the same.
+        if ((ls->aux.at(x, y, kAuxCastShadow) > 0.5f) == (l1->aux.at(x, y, kAuxCastShadow) > 0.5f)) {
+          continue;
+        }
+        ++evidence.pixels_differing;
+        const float* a = ls->pixels.pixel(x, y);
+        const float* b = l1->pixels.pixel(x, y);
+        for (int c = 0; c < 3; ++c) {
+          evidence.error_ls += (double(p[c]) - a[c]) * (double(p[c]) - a[c]);
+          evidence.error_l1 += (double(p[c]) - b[c]) * (double(p[c]) - b[c]);
+        }
+      }
+    }
+    ++evidence.images;
+  }
+  evidence.reduction = evidence.error_ls > 0 ? 1 - evidence.error_l1 / evidence.error_ls : 0.0;
+  evidence.l1 = evidence.pixels_differing >= kMinHeightFieldEvidencePixels &&
+                evidence.reduction >= kMinHeightFieldErrorReduction;
+  return evidence;
+}
+
 const char* IndirectModeName(IndirectMode mode) {
   switch (mode) {
     case IndirectMode::kAuto: return "auto";
@@ -489,6 +556,52 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                            LoadFittedCapture(capture, params_exr,
                                              options.cast_shadows && options.height_shadows));
   summary.texels = fitted->atlas.TexelCount();
+  // Normal-map captures: which integration casts the shadows (auto: the train photographs say).
+  Json height_report;
+  if (fitted->height_field != nullptr) {
+    height_report = {{"mode", HeightFieldChoiceName(options.height_field)}};
+    bool l1 = options.height_field == HeightFieldChoice::kL1;
+    std::unique_ptr<HeightField> l1_field;
+    if (options.height_field != HeightFieldChoice::kLeastSquares) {
+      const auto field_start = std::chrono::steady_clock::now();
+      HeightFieldOptions l1_options;
+      l1_options.integration = HeightFieldIntegration::kL1;
+      auto integrated = IntegrateNormalMap(fitted->atlas,
+                                           capture.cameras[capture.normal_map->camera], l1_options);
+      if (!integrated.ok()) {
+        return integrated.status().WithContext(StrCat(capture.json_path.string(), ": normal_map"));
+      }
+      l1_field = std::make_unique<HeightField>(std::move(integrated).value());
+      if (options.height_field == HeightFieldChoice::kAuto) {
+        const HeightFieldEvidence evidence = MeasureHeightFieldEvidence(*fitted, *l1_field);
+        l1 = evidence.l1;
+        height_report["evidence"] = {{"images", evidence.images},
+                                     {"skipped_images", evidence.skipped},
+                                     {"pixels", evidence.pixels},
+                                     {"pixels_differing", evidence.pixels_differing},
+                                     {"min_pixels_differing", kMinHeightFieldEvidencePixels},
+                                     {"error_ls", evidence.error_ls},
+                                     {"error_l1", evidence.error_l1},
+                                     {"reduction", evidence.reduction},
+                                     {"min_reduction", kMinHeightFieldErrorReduction},
+                                     {"seconds", SecondsSince(field_start)}};
+        REFLCAP_LOG(kInfo) << "render: height field " << (l1 ? "l1" : "ls")
+                           << " (auto: where the L1 and least-squares shadows differ, "
+                           << evidence.pixels_differing << " train pixels, L1 changes the "
+                              "squared error by "
+                           << std::lround(-100 * evidence.reduction) << " %)";
+      }
+    }
+    if (l1) fitted->height_field = std::move(l1_field);
+    const HeightFieldStats& st = fitted->height_field->stats;
+    height_report["integration"] = HeightFieldIntegrationName(st.integration);
+    if (st.integration == HeightFieldIntegration::kL1) {
+      height_report["l1"] = {{"epsilon_px", HeightFieldOptions{}.l1_epsilon_px},
+                             {"reweights", st.reweights},
+                             {"last_weight_change", st.weight_change},
+                             {"discontinuities", st.discontinuities}};
+    }
+  }
   // The pixel model: fixed, or (auto) what the train photographs show.
   Json pixel_report = {{"mode", options.supersampling == kAutoSupersampling ? "auto" : "fixed"}};
   if (fitted->normal_map) {
@@ -717,6 +830,9 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         {"height_range_px", {st.min_height_px, st.max_height_px}},
         {"bias_px", kHeightFieldShadowBiasPx},
         {"integrate_s", st.seconds}};
+    for (auto it = height_report.begin(); it != height_report.end(); ++it) {
+      report["height_field"][it.key()] = it.value();
+    }
   } else if (fitted->normal_map) {
     report["height_field"] = {
         {"cast_shadows", options.cast_shadows && options.height_shadows
@@ -743,7 +859,8 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
           {"indirect", IndirectModeName(options.indirect)},
           {"indirect_bounces", options.indirect_bounces},
           {"indirect_rays", options.indirect_rays},
-          {"psf_sigma_px", options.psf_sigma_px}}}};
+          {"psf_sigma_px", options.psf_sigma_px},
+          {"height_field", HeightFieldChoiceName(options.height_field)}}}};
   }
   REFLCAP_RETURN_IF_ERROR(WriteTextFileAtomic(out_dir / "render_report.json", report.dump(2) + "\n"));
   return summary;

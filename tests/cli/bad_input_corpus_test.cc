@@ -540,6 +540,10 @@ TEST(BadInputCorpus, RenderAndValidate) {
          return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
                 " --psf 9"; },
        kUsage, {"--psf"}},
+      {"render --height-field banana", [&](const fs::path& w) {
+         return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
+                " --height-field banana"; },
+       kUsage, {"--height-field"}},
       {"render --split banana", [&](const fs::path& w) {
          return "render " + Q(TinyCapture()) + " " + Q(TinyFit()) + " --out " + Q(w / "out") +
                 " --split banana"; },

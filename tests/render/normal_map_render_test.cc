@@ -16,6 +16,7 @@
 #include "engine/core/atomic_file.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
+#include "engine/mesh/height_field.h"
 #include "engine/mesh/texel_atlas.h"
 #include "engine/texel/brdf_maps.h"
 #include "render/reference/render_capture.h"
@@ -307,6 +308,94 @@ TEST(PointSpread, TheEvidenceFindsThePhotographsSpread) {
   }
   std::printf("worst held-out pixel error with the found spread: %.6f\n", worst);
   EXPECT_LT(worst, 6 * kNoise);  // the photographs' noise only (6σ over ~10^4 values)
+}
+
+// The render's height field (HeightFieldChoice::kAuto): a flat plate whose normal map says, in
+// its top quarter of rows only, that the right half stands kShelfStepPx higher — not integrable.
+// Least squares lifts the right half of those rows by most of the step (and the rest a little):
+// under light from the right it casts shadows to the left of the step; L1 keeps the plate flat.
+// Photographs rendered with either field's shadows choose that field.
+TEST(HeightFieldChoice, TheTrainPhotographsPickTheFieldWhoseShadowsTheyShow) {
+  constexpr double kShelfStepPx = 4.0;
+  constexpr int kW = 64, kH = 48, kColumn = 32;
+  testing::AnalyticHeight shelf;
+  shelf.inside = [](double, double) { return true; };
+  shelf.height = [](double, double) { return 0.0; };
+  shelf.gradient = [](double u, double v) {
+    return Vec2d(int(u) == kColumn && v < kH / 4 ? kShelfStepPx : 0.0, 0.0);
+  };
+  for (const bool truth_l1 : {true, false}) {
+    testing::ScratchDir dir;
+    Image normals, mask;
+    testing::NormalMapOf(shelf, kW, kH, &normals, &mask);
+    auto atlas = BuildNormalMapAtlas(normals, mask);
+    ASSERT_TRUE(atlas.ok());
+    Capture capture;
+    capture.json_path = dir / "capture.json";
+    capture.normal_map = NormalMapGeometry{0, "normals.exr", "mask.png"};
+    capture.cameras.push_back(testing::DiligentCamera(kW, kH));
+    BrdfMaps maps;
+    brdf::BrdfParams p;
+    p.rho_d = {0.5f, 0.5f, 0.5f};
+    maps.texels.assign(atlas->TexelCount(), p);
+    fs::create_directories(dir / "fit");
+    fs::create_directories(dir / "images");
+    ASSERT_TRUE(WriteBrdfMaps(dir / "fit/params.exr", maps, *atlas).ok());
+    ASSERT_TRUE(WriteExr(dir / "normals.exr", normals).ok());
+    ASSERT_TRUE(WritePng(dir / "mask.png", mask).ok());
+    HeightFieldOptions truth_options;
+    truth_options.integration =
+        truth_l1 ? HeightFieldIntegration::kL1 : HeightFieldIntegration::kLeastSquares;
+    auto truth = IntegrateNormalMap(*atlas, capture.cameras[0], truth_options);
+    ASSERT_TRUE(truth.ok());
+    for (int l = 0; l < 10; ++l) {
+      Light light;
+      light.id = StrCat("L", l);
+      light.type = LightType::kDirectional;
+      // From the right (+x, the image's +u), low: the raised right half shadows the left.
+      const double az = DegToRad(-20 + 4.0 * l), el = DegToRad(10 + 1.5 * l);
+      light.direction = Vec3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+      capture.lights.push_back(light);
+      CaptureImage image;
+      image.file = StrCat("images/", l, ".exr");
+      image.light = l;
+      image.split = l % 5 == 4 ? Split::kHoldout : Split::kTrain;
+      capture.images.push_back(image);
+      auto photo = RenderNormalMapImage(*atlas, maps, capture.cameras[0], light, 1.0,
+                                        RenderOptions{}, &*truth);
+      ASSERT_TRUE(photo.ok());
+      ASSERT_TRUE(WriteExr(dir / image.file, photo->pixels, ExrPixelType::kFloat).ok());
+    }
+    ASSERT_TRUE(WriteCapture(capture, capture.json_path).ok());
+    auto fitted = LoadFittedCapture(capture, dir / "fit/params.exr");
+    ASSERT_TRUE(fitted.ok());
+    HeightFieldOptions l1_options;
+    l1_options.integration = HeightFieldIntegration::kL1;
+    auto l1_field = IntegrateNormalMap(*atlas, capture.cameras[0], l1_options);
+    ASSERT_TRUE(l1_field.ok());
+    const HeightFieldEvidence evidence = MeasureHeightFieldEvidence(**fitted, *l1_field);
+    std::printf("photographs with %s shadows: %zu pixels of differing shadow, reduction %.3f\n",
+                truth_l1 ? "L1" : "least-squares", evidence.pixels_differing, evidence.reduction);
+    EXPECT_GE(evidence.pixels_differing, kMinHeightFieldEvidencePixels);
+    EXPECT_EQ(evidence.l1, truth_l1);
+    // The photographs are one field's renders: where the shadows differ, that field's render
+    // is exact and the other's is all error.
+    if (truth_l1) {
+      EXPECT_EQ(evidence.error_l1, 0.0);
+      EXPECT_NEAR(evidence.reduction, 1.0, 1e-12);
+    } else {
+      EXPECT_EQ(evidence.error_ls, 0.0);
+      EXPECT_GT(evidence.error_l1, 0.0);
+      EXPECT_LE(evidence.reduction, 0.0);
+    }
+
+    CaptureRenderOptions options;
+    ASSERT_TRUE(RenderCapture(capture, dir / "fit/params.exr", dir / "render", options).ok());
+    const auto report =
+        nlohmann::json::parse(ReadTextFile(dir / "render/render_report.json").value());
+    EXPECT_EQ(report["height_field"]["mode"], "auto");
+    EXPECT_EQ(report["height_field"]["integration"], truth_l1 ? "l1" : "ls");
+  }
 }
 
 }  // namespace

@@ -150,6 +150,61 @@ TEST(HeightFieldIntegration, ComponentsAreIntegratedApartAndSilhouettesClamped) 
   EXPECT_LT(field->At(15, 15), 15.0);
 }
 
+// A tilted plane whose gradients carry a step of kStepPx at one column in the top quarter of the
+// rows only: the field is not integrable (those rows say the right part is kStepPx higher, the
+// other three quarters that it is not). Least squares spreads the contradiction over the
+// equations around it: the right part bends towards a quarter of the step. L1 takes the
+// majority (its optimum is the median-like one): the right part stays on the plane, and the few
+// equations of the minority carry the whole contradiction.
+TEST(HeightFieldIntegration, L1KeepsAStepSharpWhereLeastSquaresSpreadsIt) {
+  constexpr double kStepPx = 4.0;
+  constexpr int kW = 60, kH = 40, kStepColumn = 30;
+  AnalyticHeight shelf;
+  shelf.inside = [](double, double) { return true; };
+  shelf.height = [](double u, double) { return 0.5 * u; };
+  shelf.gradient = [](double u, double v) {
+    // The texel's gradient enters the trapezoid equations on both sides of it: kStepPx in all.
+    const bool step = int(u) == kStepColumn && v < kH / 4;
+    return Vec2d(0.5 + (step ? kStepPx : 0.0), 0.0);
+  };
+  const Camera cam = DiligentCamera(kW, kH);
+  const TexelAtlas atlas = AtlasOf(shelf, kW, kH);
+  HeightFieldOptions l1_options;
+  l1_options.integration = HeightFieldIntegration::kL1;
+  auto ls = IntegrateNormalMap(atlas, cam);
+  auto l1 = IntegrateNormalMap(atlas, cam, l1_options);
+  ASSERT_TRUE(ls.ok() && l1.ok());
+  std::printf("least squares: %s\nL1: %s\n", ls->stats.ToString().c_str(),
+              l1->stats.ToString().c_str());
+  EXPECT_EQ(l1->stats.integration, HeightFieldIntegration::kL1);
+  EXPECT_GT(l1->stats.reweights, 0);
+  // The height across the step column (from 3 px left to 3 px right of it), against the plane's
+  // 3 px: what each integration made of the contradiction, in every row.
+  auto jump = [&](const HeightField& f, int y) {
+    return f.At(kStepColumn + 3, y) - f.At(kStepColumn - 3, y) - 3.0;
+  };
+  double worst_l1 = 0, least_ls = kStepPx;
+  for (int y = kH / 2; y < kH; ++y) {  // the majority's rows, a quarter of the image away
+    worst_l1 = std::max(worst_l1, std::abs(jump(*l1, y)));
+    least_ls = std::min(least_ls, jump(*ls, y));
+  }
+  std::printf("jump across the column in the majority's rows: L1 at most %.4f px, least "
+              "squares at least %.4f px\n", worst_l1, least_ls);
+  // Measured: L1 at most 0.038 px there (the ε-smoothing and the reweighting's stopping point),
+  // least squares 0.12–0.34 px.
+  EXPECT_LT(worst_l1, 0.06);
+  EXPECT_GT(least_ls, 0.1);
+  EXPECT_GT(least_ls, 3 * worst_l1);
+  // The minority's equations are let go: about two per contradicting row.
+  EXPECT_GE(l1->stats.discontinuities, size_t(kH / 4));
+  EXPECT_EQ(ls->stats.discontinuities, 0u);
+  // An integrable field has nothing to let go: L1 integrates the sphere cap as least squares does.
+  const AnalyticHeight cap = testing::SphereCap(47.5, 45.5, 40, 36);
+  auto cap_l1 = IntegrateNormalMap(AtlasOf(cap, 96, 92), DiligentCamera(96, 92), l1_options);
+  ASSERT_TRUE(cap_l1.ok());
+  EXPECT_LT(WorstHeightError(*cap_l1, cap), kSphereCapTolerancePx) << cap_l1->stats.ToString();
+}
+
 TEST(HeightFieldIntegration, RefusesPinholeCamerasAndMismatchedSizes) {
   const TexelAtlas atlas = AtlasOf(testing::SphereCap(8, 8, 6, 5), 16, 16);
   Camera pinhole = DiligentCamera(16, 16);
