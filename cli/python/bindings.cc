@@ -795,7 +795,10 @@ PYBIND11_MODULE(reflcap, m) {
   m.def("render_view", &RenderView, py::arg("capture"), py::arg("fit"), py::arg("index"),
         py::arg("supersample") = 1, py::arg("cast_shadows") = true, py::arg("mask") = false,
         "Renders capture image `index` from a fit (FIT folder or params.exr) with the CPU "
-        "reference renderer, as `reflcap render` does: H x W x 3 float32 (exposure_s x "
-        "radiance); with mask=True a tuple (pixels, H x W mask).");
+        "reference renderer: the direct light of `reflcap render` (a normal-map capture's "
+        "shadows from its least-squares height field; without the interreflection, stray light, "
+        "point spread and L1 height field that `reflcap render` adds when the train photographs "
+        "ask for them): H x W x 3 float32 (exposure_s x radiance); with mask=True a tuple "
+        "(pixels, H x W mask).");
   m.attr("MAX_LOBES") = reflcap::brdf::kMaxLobes;
 }
