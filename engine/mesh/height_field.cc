@@ -204,7 +204,8 @@ StatusOr<HeightField> IntegrateNormalMap(const TexelAtlas& atlas, const Camera& 
       for (size_t k = 0; k < equations.size(); ++k) {
         const Equation& e = equations[k];
         const double r = z[e.b] - z[e.a] - e.g;
-        // In (0, 1]: 1 for r = 0; the weight that makes r² w = the smoothed |r| at this r.
+        // The Charbonnier penalty's IRLS weight ρ'(r) / r = 1 / √(r² + ε²), times ε so that it
+        // lies in (0, 1] (1 at r = 0): a common scale of all weights does not move the solution.
         const double w = eps / std::sqrt(r * r + eps * eps);
         change = std::max(change, std::abs(w - weight[k]));
         weight[k] = w;
