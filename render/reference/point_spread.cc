@@ -17,7 +17,7 @@ namespace {
 constexpr double kPsfTruncationSigmas = 3.0;
 
 std::vector<double> GaussianTaps(double sigma_px) {
-  const int radius = std::max(1, int(std::ceil(kPsfTruncationSigmas * sigma_px)));
+  const int radius = int(std::ceil(kPsfTruncationSigmas * sigma_px));  // >= 1 for sigma > 0
   std::vector<double> taps(size_t(2 * radius + 1));
   for (int d = -radius; d <= radius; ++d) {
     taps[size_t(d + radius)] = std::exp(-0.5 * double(d * d) / (sigma_px * sigma_px));
@@ -48,6 +48,8 @@ void BlurWithinMask(const Image& mask, double sigma_px, Image* pixels) {
   const int radius = int(taps.size() / 2);
   const int w = pixels->width, h = pixels->height, nc = pixels->channels;
   const int stride = nc + 1;  // the masked channels, then the mask's weight
+  constexpr int kMaxStride = 16;  // the vertical pass sums on the stack
+  REFLCAP_CHECK(stride <= kMaxStride) << nc << " channels";
   // Masked values and the mask itself, blurred along x then along y.
   std::vector<double> in(size_t(w) * size_t(h) * size_t(stride), 0.0);
   for (int y = 0; y < h; ++y) {
@@ -76,8 +78,7 @@ void BlurWithinMask(const Image& mask, double sigma_px, Image* pixels) {
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       if (!(mask.at(x, y) > 0.5f)) continue;
-      std::array<double, 16> sum{};
-      REFLCAP_CHECK(stride <= int(sum.size()));
+      std::array<double, kMaxStride> sum{};
       for (int d = -radius; d <= radius; ++d) {
         const int yy = y + d;
         if (yy < 0 || yy >= h) continue;
@@ -112,27 +113,26 @@ PsfEvidence MeasurePsfEvidence(const FittedCapture& fitted, bool cast_shadows,
     Image& sharp = rendered->pixels;
     if (stray != nullptr) AddStrayLight(fitted, *stray, index, &sharp);
     const Image& photo = *read;
+    // Σ (photo − render)² over the usable mask pixels; returns how many there were.
     auto add_error = [&](const Image& render, double* error) {
+      size_t pixels = 0;
       for (int y = 0; y < camera.height; ++y) {
         for (int x = 0; x < camera.width; ++x) {
           if (!(rendered->mask.at(x, y) > 0.5f)) continue;
           const float* p = photo.pixel(x, y);
           if (!UsablePixel(p, image)) continue;
+          ++pixels;
           const float* q = render.pixel(x, y);
           for (int c = 0; c < 3; ++c) *error += (double(p[c]) - q[c]) * (double(p[c]) - q[c]);
         }
       }
+      return pixels;
     };
-    add_error(sharp, &evidence.error_sharp);
+    evidence.pixels += add_error(sharp, &evidence.error_sharp);
     for (size_t k = 0; k < kPsfCandidatesPx.size(); ++k) {
       Image blurred = sharp;
       BlurWithinMask(rendered->mask, kPsfCandidatesPx[k], &blurred);
       add_error(blurred, &evidence.error[k]);
-    }
-    for (int y = 0; y < camera.height; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        evidence.pixels += rendered->mask.at(x, y) > 0.5f && UsablePixel(photo.pixel(x, y), image);
-      }
     }
     ++evidence.images;
   }

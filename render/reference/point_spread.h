@@ -2,9 +2,9 @@
 // The photographs' point spread, for normal-map captures: a normal map's pixel is its texel, so
 // the render shades each pixel once, exactly at its centre's normal — while a camera's optics and
 // sensor spread every point over a little of its neighbours (and the normal map is registered to
-// the photographs only to a fraction of a pixel). On DiLiGenT a Gaussian of σ = 0.5–0.7 px removes
-// 1.4–12 % of the train photographs' squared error against the sharp render, most of it beside
-// terminators and shadow edges, where a sharp render steps from lit to dark in one pixel.
+// the photographs only to a fraction of a pixel): at terminators and shadow edges a sharp render
+// steps from lit to dark in one pixel. On DiLiGenT a Gaussian of σ = 0.5–0.7 px removes 1.3–12 %
+// of the train photographs' squared error against the sharp render.
 //
 // The render blurs each image within the object's mask (normalised convolution: background
 // pixels neither give nor take light) after the direct light and the stray light are drawn:
@@ -35,8 +35,8 @@ constexpr std::array<double, 7> kPsfCandidatesPx = {0.35, 0.5, 0.6, 0.7, 0.85, 1
 // Evidence photographs: 8 lights already show every terminator and shadow edge many times over.
 constexpr int kPsfEvidenceImages = 8;
 // A blur must remove at least this share of the sharp render's squared error. Sharp synthetic
-// photographs lose error under any blur (their normals are exact); DiLiGenT gains 1.4 % (cat) to
-// 12 % (bear). 1 % asks for a real gain, not noise.
+// photographs lose error under any blur (their normals are exact); DiLiGenT gains 1.3 % (ball16)
+// to 12 % (bear). 1 % asks for a real gain, not noise.
 constexpr double kMinPsfErrorReduction = 0.01;
 
 // Blurs `pixels` (any channel count) within `mask` (1 channel, > 0.5 = object; the same size)

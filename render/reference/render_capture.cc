@@ -516,6 +516,88 @@ std::unique_ptr<StrayLight> PrepareStrayLight(const FittedCapture& fitted,
   return stray;
 }
 
+// Normal-map captures with a height field: integrates the L1 field unless options say least
+// squares, keeps it in `fitted` when chosen (HeightFieldChoice), and says what decided it for
+// render_report.json `height_field`.
+Status ChooseHeightField(const CaptureRenderOptions& options, FittedCapture* fitted,
+                         Json* report) {
+  const Capture& capture = *fitted->capture;
+  *report = {{"mode", HeightFieldChoiceName(options.height_field)}};
+  if (options.height_field != HeightFieldChoice::kLeastSquares) {
+    const auto start = std::chrono::steady_clock::now();
+    HeightFieldOptions l1_options;
+    l1_options.integration = HeightFieldIntegration::kL1;
+    auto l1_field = IntegrateNormalMap(fitted->atlas, capture.cameras[capture.normal_map->camera],
+                                       l1_options);
+    if (!l1_field.ok()) {
+      return l1_field.status().WithContext(StrCat(capture.json_path.string(), ": normal_map"));
+    }
+    bool l1 = options.height_field == HeightFieldChoice::kL1;
+    if (options.height_field == HeightFieldChoice::kAuto) {
+      const HeightFieldEvidence evidence = MeasureHeightFieldEvidence(*fitted, *l1_field);
+      l1 = evidence.l1;
+      (*report)["evidence"] = {{"images", evidence.images},
+                               {"skipped_images", evidence.skipped},
+                               {"pixels", evidence.pixels},
+                               {"pixels_differing", evidence.pixels_differing},
+                               {"min_pixels_differing", kMinHeightFieldEvidencePixels},
+                               {"error_ls", evidence.error_ls},
+                               {"error_l1", evidence.error_l1},
+                               {"reduction", evidence.reduction},
+                               {"min_reduction", kMinHeightFieldErrorReduction},
+                               {"seconds", SecondsSince(start)}};
+      REFLCAP_LOG(kInfo) << "render: height field " << (l1 ? "l1" : "ls")
+                         << " (auto: where the L1 and least-squares shadows differ, "
+                         << evidence.pixels_differing << " train pixels, L1 changes the "
+                            "squared error by "
+                         << std::lround(-100 * evidence.reduction) << " %)";
+    }
+    if (l1) fitted->height_field = std::make_unique<HeightField>(std::move(l1_field).value());
+  }
+  const HeightFieldStats& st = fitted->height_field->stats;
+  (*report)["integration"] = HeightFieldIntegrationName(st.integration);
+  if (st.integration == HeightFieldIntegration::kL1) {
+    (*report)["l1"] = {{"epsilon_px", HeightFieldOptions{}.l1_epsilon_px},
+                       {"reweights", st.reweights},
+                       {"last_weight_change", st.weight_change},
+                       {"discontinuities", st.discontinuities}};
+  }
+  return OkStatus();
+}
+
+// Normal-map captures: the point spread's σ (0 = sharp) from options or (auto) the train
+// photographs, rendered with `stray` (may be null) as the render adds it; `report` for
+// render_report.json `pixel_model.psf`.
+double ChoosePointSpread(const FittedCapture& fitted, const CaptureRenderOptions& options,
+                         const StrayLight* stray, Json* report) {
+  *report = {{"mode", options.psf_sigma_px == kAutoPsf ? "auto" : "fixed"}};
+  double sigma_px = options.psf_sigma_px;
+  if (options.psf_sigma_px == kAutoPsf) {
+    const auto start = std::chrono::steady_clock::now();
+    const PsfEvidence evidence = MeasurePsfEvidence(fitted, options.cast_shadows, stray);
+    sigma_px = evidence.sigma_px;
+    Json errors = Json::object();
+    for (size_t k = 0; k < kPsfCandidatesPx.size(); ++k) {
+      errors[StrCat(kPsfCandidatesPx[k])] = evidence.error[k];
+    }
+    (*report)["evidence"] = {{"images", evidence.images},
+                             {"skipped_images", evidence.skipped},
+                             {"pixels", evidence.pixels},
+                             {"error_sharp", evidence.error_sharp},
+                             {"error_by_sigma_px", errors},
+                             {"best_sigma_px", evidence.best_sigma_px},
+                             {"reduction", evidence.reduction},
+                             {"min_reduction", kMinPsfErrorReduction},
+                             {"seconds", SecondsSince(start)}};
+    REFLCAP_LOG(kInfo) << "render: point spread " << sigma_px << " px (auto: a "
+                       << evidence.best_sigma_px << " px spread changes the train "
+                       << "photographs' squared error by "
+                       << std::lround(-100 * evidence.reduction) << " %)";
+  }
+  (*report)["sigma_px"] = sigma_px;
+  return sigma_px;
+}
+
 StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::path& params_exr,
                                              const fs::path& out_dir,
                                              const CaptureRenderOptions& options,
@@ -559,48 +641,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   // Normal-map captures: which integration casts the shadows (auto: the train photographs say).
   Json height_report;
   if (fitted->height_field != nullptr) {
-    height_report = {{"mode", HeightFieldChoiceName(options.height_field)}};
-    bool l1 = options.height_field == HeightFieldChoice::kL1;
-    std::unique_ptr<HeightField> l1_field;
-    if (options.height_field != HeightFieldChoice::kLeastSquares) {
-      const auto field_start = std::chrono::steady_clock::now();
-      HeightFieldOptions l1_options;
-      l1_options.integration = HeightFieldIntegration::kL1;
-      auto integrated = IntegrateNormalMap(fitted->atlas,
-                                           capture.cameras[capture.normal_map->camera], l1_options);
-      if (!integrated.ok()) {
-        return integrated.status().WithContext(StrCat(capture.json_path.string(), ": normal_map"));
-      }
-      l1_field = std::make_unique<HeightField>(std::move(integrated).value());
-      if (options.height_field == HeightFieldChoice::kAuto) {
-        const HeightFieldEvidence evidence = MeasureHeightFieldEvidence(*fitted, *l1_field);
-        l1 = evidence.l1;
-        height_report["evidence"] = {{"images", evidence.images},
-                                     {"skipped_images", evidence.skipped},
-                                     {"pixels", evidence.pixels},
-                                     {"pixels_differing", evidence.pixels_differing},
-                                     {"min_pixels_differing", kMinHeightFieldEvidencePixels},
-                                     {"error_ls", evidence.error_ls},
-                                     {"error_l1", evidence.error_l1},
-                                     {"reduction", evidence.reduction},
-                                     {"min_reduction", kMinHeightFieldErrorReduction},
-                                     {"seconds", SecondsSince(field_start)}};
-        REFLCAP_LOG(kInfo) << "render: height field " << (l1 ? "l1" : "ls")
-                           << " (auto: where the L1 and least-squares shadows differ, "
-                           << evidence.pixels_differing << " train pixels, L1 changes the "
-                              "squared error by "
-                           << std::lround(-100 * evidence.reduction) << " %)";
-      }
-    }
-    if (l1) fitted->height_field = std::move(l1_field);
-    const HeightFieldStats& st = fitted->height_field->stats;
-    height_report["integration"] = HeightFieldIntegrationName(st.integration);
-    if (st.integration == HeightFieldIntegration::kL1) {
-      height_report["l1"] = {{"epsilon_px", HeightFieldOptions{}.l1_epsilon_px},
-                             {"reweights", st.reweights},
-                             {"last_weight_change", st.weight_change},
-                             {"discontinuities", st.discontinuities}};
-    }
+    REFLCAP_RETURN_IF_ERROR(ChooseHeightField(options, fitted.get(), &height_report));
   }
   // The pixel model: fixed, or (auto) what the train photographs show.
   Json pixel_report = {{"mode", options.supersampling == kAutoSupersampling ? "auto" : "fixed"}};
@@ -617,7 +658,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                                 {"pixels", evidence.pixels},
                                 {"error_point", evidence.error_point},
                                 {"error_box", evidence.error_box},
-                         {"reduction", evidence.reduction},
+                                {"reduction", evidence.reduction},
                                 {"min_reduction", kMinPixelErrorReduction},
                                 {"seconds", SecondsSince(pixel_start)}};
     pixel_report["why"] = evidence.box ? "the train photographs integrate over their pixels"
@@ -642,33 +683,8 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   // evidence renders include).
   double psf_sigma_px = 0;
   if (fitted->normal_map) {
-    Json psf = {{"mode", options.psf_sigma_px == kAutoPsf ? "auto" : "fixed"}};
-    if (options.psf_sigma_px == kAutoPsf) {
-      const auto psf_start = std::chrono::steady_clock::now();
-      const PsfEvidence evidence =
-          MeasurePsfEvidence(*fitted, options.cast_shadows, stray.get());
-      psf_sigma_px = evidence.sigma_px;
-      Json errors = Json::object();
-      for (size_t k = 0; k < kPsfCandidatesPx.size(); ++k) {
-        errors[StrCat(kPsfCandidatesPx[k])] = evidence.error[k];
-      }
-      psf["evidence"] = {{"images", evidence.images},
-                         {"skipped_images", evidence.skipped},
-                         {"pixels", evidence.pixels},
-                         {"error_sharp", evidence.error_sharp},
-                         {"error_by_sigma_px", errors},
-                         {"best_sigma_px", evidence.best_sigma_px},
-                         {"reduction", evidence.reduction},
-                         {"min_reduction", kMinPsfErrorReduction},
-                         {"seconds", SecondsSince(psf_start)}};
-      REFLCAP_LOG(kInfo) << "render: point spread " << psf_sigma_px << " px (auto: a "
-                         << evidence.best_sigma_px << " px spread changes the train "
-                         << "photographs' squared error by "
-                         << std::lround(-100 * evidence.reduction) << " %)";
-    } else {
-      psf_sigma_px = options.psf_sigma_px;
-    }
-    psf["sigma_px"] = psf_sigma_px;
+    Json psf;
+    psf_sigma_px = ChoosePointSpread(*fitted, options, stray.get(), &psf);
     pixel_report["psf"] = psf;
   }
   summary.num_lobes = fitted->maps.num_lobes;

@@ -90,6 +90,7 @@ Solution Solve(const FittedCapture& fitted, const std::vector<std::array<Sums, 2
     const Vec3f& normal = atlas.shading_normal[t];
     for (int c = 0; c < 3; ++c) {
       const auto& e = out.environment[size_t(c)];
+      // Clamped at 0: a first-order fit can dip below 0 for normals it saw none of; light can't.
       const double irradiance =
           std::max(0.0, e[0] + e[1] * normal.x() + e[2] * normal.y() + e[3] * normal.z());
       const double rho = fitted.maps.texels[t].rho_d[size_t(c)];
