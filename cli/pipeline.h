@@ -59,6 +59,7 @@ struct FitFlags {
   int cluster_size = 0;
   bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
   bool no_material_clusters = false;
+  bool no_diffuse_falloff = false;
   // The Vulkan fitter's kernel and cluster size (after Apply; its device comes from --device).
   fit::VulkanFitterOptions vulkan;
   void Register(ArgParser* args, fit::FitOptions* options);

@@ -39,6 +39,10 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
   args->AddFlag("no-material-clusters", &no_material_clusters,
                 "do not cluster texels by albedo to lend the texels still without a lobe one "
                 "that the pooled samples of their material support");
+  args->AddFlag("no-diffuse-falloff", &no_diffuse_falloff,
+                "keep Lambert-only the texels without a lobe instead of letting them take a "
+                "generalized diffuse lobe (Cx = Cy = 0: darker towards grazing light) where "
+                "their own held-out photographs prefer it");
   args->AddInt("max-material-clusters", &options->clusters.max_clusters,
                "material clusters: at most N (default 64)");
   args->AddString("model-choice", &model_choice, "NAME",
@@ -87,6 +91,7 @@ Status FitFlags::Apply(fit::FitOptions* options) {
   options->select_lobe_model = auto_model;
   options->lobe_transfer.enabled = !no_lobe_transfer;
   options->clusters.enabled = !no_material_clusters;
+  options->diffuse_falloff = !no_diffuse_falloff;
   REFLCAP_ASSIGN_OR_RETURN(options->clusters.model_choice, fit::ParseModelChoice(model_choice));
   options->albedo_fill.enabled = !no_albedo_fill;
   options->channel_retry = !no_channel_retry;
@@ -198,6 +203,10 @@ int RunFit(int argc, char** argv) {
                 summary->lobes_transferred, summary->material_clusters,
                 summary->material_clusters_with_lobe, summary->cluster_lobes_lent,
                 summary->cluster_lobes_replaced);
+    if (options.diffuse_falloff) {
+      std::printf("  diffuse fall-off lobe: %zu of %zu Lambert-only texels\n",
+                  summary->falloff_taken, summary->falloff_candidates);
+    }
   }
   return 0;
 }

@@ -530,9 +530,9 @@ py::array_t<float> EvalBrdf(const py::object& params_arg, const py::object& wi_a
         // all-zero pixels of a map without texel are evaluated as 0).
         const brdf::LobeParams& l = p[r].lobes[k][c];
         const bool absent = l.cx == 0 && l.cy == 0 && l.cz == 0;
-        if (!(e >= brdf::kMinExponent && e <= brdf::kMaxExponent) && !absent) {
+        if (!(e >= brdf::kMinLobeExponent && e <= brdf::kMaxExponent) && !absent) {
           ThrowStatus(InvalidArgumentError("params: row ", r, ": lobe", k, ".n.", "RGB"[c], " = ",
-                                           e, " outside [", brdf::kMinExponent, ", ",
+                                           e, " outside [", brdf::kMinLobeExponent, ", ",
                                            brdf::kMaxExponent, "]"));
         }
         if (absent) p[r].lobes[k][c].n = 1;
@@ -791,7 +791,7 @@ PYBIND11_MODULE(reflcap, m) {
         "backend 'cpu', 'ceres' or 'vulkan' (RuntimeError when no Vulkan device). Returns "
         "params and sigma (T x P, T = max(texel) + 1), status (int32, see status_names), cost, "
         "iterations, samples, lambert_only, channels, backend, device. Per-texel, as "
-        "`reflcap fit` before lobe transfer, material clusters and albedo fill.");
+        "`reflcap fit` before lobe transfer, material clusters, albedo fill and diffuse fall-off.");
   m.def("render_view", &RenderView, py::arg("capture"), py::arg("fit"), py::arg("index"),
         py::arg("supersample") = 1, py::arg("cast_shadows") = true, py::arg("mask") = false,
         "Renders capture image `index` from a fit (FIT folder or params.exr) with the CPU "

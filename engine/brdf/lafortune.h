@@ -15,10 +15,13 @@
 // test that wi and wo lie in the upper hemisphere: directions below the surface are the caller's
 // business (a fitter should mask such samples, e.g. below a kMinCosTheta).
 //
-// Valid exponents are n in [kMinExponent, kMaxExponent]; callers (the fitter's box projection)
-// keep n in that range, and the evaluation only checks it in debug builds. The analytic gradient (EvalChannelWithGradient) is
-// exact, finite for any base and any n in range, and exactly 0 where a lobe is cut off (b <=
-// kPowBaseMin) or saturated (b^n > kMaxLobeValue).
+// A lobe's exponent lies in [kMinLobeExponent, kMaxExponent]: the fitters (their box projection)
+// keep the lobes they fit in [kMinExponent, kMaxExponent]; only the generalized diffuse lobe
+// (Cx = Cy = 0, engine/fit/diffuse_falloff.h), fitted in closed form, goes below 1. The
+// evaluation checks the range in debug builds only. The analytic gradient
+// (EvalChannelWithGradient, the fitters' tool) is exact, finite for any base and any n in
+// [kMinExponent, kMaxExponent], and exactly 0 where a lobe is cut off (b <= kPowBaseMin) or
+// saturated (b^n > kMaxLobeValue).
 //
 // Parameter layout of one channel, as the fitter, the GPU shaders and the texture sets store it:
 //   [rho_d, Cx_0, Cy_0, Cz_0, n_0, Cx_1, Cy_1, Cz_1, n_1, ...]   (ParamsPerChannel(num_lobes))
@@ -45,6 +48,12 @@ constexpr int kMaxParamsPerChannel = ParamsPerChannel(kMaxLobes);
 // For n > 1 the lobe is C1 at the cut-off b = 0 (slope -> 0), so zeroing its gradient there is
 // exact; n = 1 has a finite kink.
 constexpr double kMinExponent = 1.0;
+// The generalized diffuse lobe (Cx = Cy = 0) is no glossy lobe: (Cz cos theta_i cos theta_o)^n
+// with n < 1 darkens a surface towards grazing light and view without the sharp cut-off of
+// n >= 1 (DiLiGenT pot1 and cat choose n = 0.25-0.75 for a third of their texels). Its value is
+// finite and continuous for every n > 0 (b^n -> 0 as b -> 0+); 0.25 is the smallest exponent
+// engine/fit/diffuse_falloff.h tries. Its gradient is never taken (it is not fitted by LM).
+constexpr double kMinLobeExponent = 0.25;
 // n = 1e4 gives a lobe about 1/sqrt(n) = 0.01 rad (0.6 degrees) wide, narrower than a capture's
 // angular resolution (light source and pixel footprints ~1 degree). It also bounds float error:
 // rounding of b (6e-8 relative) is amplified n-fold in b^n, 6e-4 at most.
@@ -56,10 +65,10 @@ constexpr double kMaxExponent = 1e4;
 constexpr double kMaxLobeValue = 1e30;
 
 // One Lafortune lobe max(0, Cx wix wox + Cy wiy woy + Cz wiz woz)^n, saturated at kMaxLobeValue.
-// wi, wo: 3-vectors in the tangent frame; n in [kMinExponent, kMaxExponent].
+// wi, wo: 3-vectors in the tangent frame; n in [kMinLobeExponent, kMaxExponent].
 template <typename T>
 T LafortuneLobe(const T* wi, const T* wo, const T& cx, const T& cy, const T& cz, const T& n) {
-  REFLCAP_DCHECK(!(n < kMinExponent) && !(n > kMaxExponent)) << "Lafortune exponent " << n;
+  REFLCAP_DCHECK(!(n < kMinLobeExponent) && !(n > kMaxExponent)) << "Lafortune exponent " << n;
   // Products wi_j wo_j first: IEEE multiplication commutes, so f(wi, wo) == f(wo, wi) exactly and
   // EvalChannelWithGradient, which forms the same products, returns the same value bit for bit.
   const T base = cx * (wi[0] * wo[0]) + cy * (wi[1] * wo[1]) + cz * (wi[2] * wo[2]);

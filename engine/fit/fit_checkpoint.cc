@@ -227,6 +227,7 @@ Json FitOptionsToJson(const FitOptions& o) {
         {"lobes_per_cluster", o.clusters.lobes_per_cluster},
         {"model_choice", ModelChoiceName(o.clusters.model_choice)},
         {"folds", o.clusters.folds}}},
+      {"diffuse_falloff", o.diffuse_falloff},
       {"albedo_fill",
        {{"enabled", o.albedo_fill.enabled},
         {"radius", o.albedo_fill.radius},
@@ -321,6 +322,11 @@ Status FitOptionsFromJson(const Json& json, const std::string& file, FitOptions*
   }
   o->clusters.model_choice = *parsed_choice;
   if (c.contains("folds")) REFLCAP_RETURN_IF_ERROR(Field(c, "folds", file, wc, &o->clusters.folds));
+  // Absent in files written before the fall-off lobe existed: those fits had none.
+  o->diffuse_falloff = false;
+  if (json.contains("diffuse_falloff")) {
+    REFLCAP_RETURN_IF_ERROR(Field(json, "diffuse_falloff", file, w, &o->diffuse_falloff));
+  }
   const Json& a = json["albedo_fill"];
   const std::string wa = "options.albedo_fill.";
   REFLCAP_RETURN_IF_ERROR(Field(a, "enabled", file, wa, &o->albedo_fill.enabled));

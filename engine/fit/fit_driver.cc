@@ -9,6 +9,7 @@
 #include <functional>
 #include <future>
 #include <optional>
+#include <sstream>
 #include <utility>
 
 #ifdef __GLIBC__
@@ -22,6 +23,7 @@
 #include "engine/core/parallel.h"
 #include "engine/core/progress.h"
 #include "engine/fit/albedo_fill.h"
+#include "engine/fit/diffuse_falloff.h"
 #include "engine/fit/lobe_transfer.h"
 #include "engine/fit/material_clusters.h"
 #include "engine/fit/problem.h"
@@ -91,9 +93,10 @@ void ReleaseFreeHeap() {
 
 const char* const kTexelModelNames[kTexelModelCount] = {
     "lambert_lobe_absent", "lambert_no_evidence", "own_lobe", "neighbour_lobe", "cluster_lobe",
-    "no_samples"};
+    "no_samples", "falloff_lobe"};
 
 TexelModel TexelModelOf(const FitStore& fits, size_t t) {
+  if (fits.donor(t) == FitStore::kDiffuseFalloff) return TexelModel::kFalloffLobe;
   if (fits.samples(t) == 0 && fits.donor(t) != FitStore::kClusterLobe) return TexelModel::kNoSamples;
   if (fits.donor(t) == FitStore::kClusterLobe) return TexelModel::kClusterLobe;
   if (fits.donor(t) >= 0) return TexelModel::kNeighbourLobe;
@@ -151,9 +154,10 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     float* px = &sigmas.data[size_t(atlas.pixel_of_texel[t]) * n];
     PutTexel(channel, in, px);
     // Lobe transfer re-fitted the albedo of a texel with a donor: re-fitted, not measured. A
-    // cluster lobe replaced whatever lobe the texel fitted: none of its own sigmas apply.
+    // cluster lobe replaced whatever lobe the texel fitted, and a fall-off lobe was fitted in
+    // closed form after the LM: none of its own sigmas apply.
     if (fits->borrowed(t)) {
-      const int unknown = fits->donor(t) == FitStore::kClusterLobe ? n : brdf::kChannels;
+      const int unknown = fits->donor(t) < 0 ? n : brdf::kChannels;
       for (int c = 0; c < unknown; ++c) px[c] = -1;
     }
   }));
@@ -161,6 +165,17 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
 }
 
 namespace {
+
+// fit_report.json `diffuse_falloff`: candidates, taken, and taken per exponent ("0.25", "1", ...).
+Json FalloffJson(const DiffuseFalloffStats& s) {
+  Json by = Json::object();
+  for (int k = 0; k < kFalloffExponentCount; ++k) {
+    std::ostringstream name;
+    name << kFalloffExponents[size_t(k)];
+    by[name.str()] = s.by_exponent[size_t(k)];
+  }
+  return {{"candidates", s.candidates}, {"taken", s.taken}, {"by_exponent", by}};
+}
 
 // Decoded sample chunks RunFit keeps in memory for lobe transfer: a quarter of the machine's
 // physical memory, at most 8 GiB (the million preset's store decodes to ~1.9 GiB), so the fit
@@ -389,7 +404,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
       options.select_lobe_model && options.lobe_model == LobeModel::kAniso && options.lobes > 0;
   auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
   const uint64_t cache_budget =
-      (options.lobe_transfer.enabled || options.clusters.enabled) && options.lobes > 0
+      (options.lobe_transfer.enabled || options.clusters.enabled || options.diffuse_falloff) &&
+              options.lobes > 0
           ? SampleCacheBudget()
           : 0;
   FitRunSummary summary;
@@ -503,7 +519,19 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
         }));
   }
   const double cluster_seconds = Seconds(cluster_start);
-  cached = {};  // the kept chunks are not needed past the transfer
+  // Diffuse fall-off (diffuse_falloff.h): the texels still Lambert-only may take a generalized
+  // diffuse lobe, when their own held-out photographs prefer it.
+  const auto falloff_start = std::chrono::steady_clock::now();
+  DiffuseFalloffStats falloff;
+  if (options.diffuse_falloff && options.lobes > 0) {
+    REFLCAP_RETURN_IF_ERROR(visit_chunks(
+        [&](uint64_t first, uint64_t end) { return DiffuseFalloffCandidatesIn(fits, first, end); },
+        [&](const TexelSampleChunk& chunk) {
+          ApplyDiffuseFalloff(chunk, options, options.clusters.folds, &fits, &falloff);
+        }));
+  }
+  const double falloff_seconds = Seconds(falloff_start);
+  cached = {};  // the kept chunks are not needed past the post-fit passes
 
 
   const auto write_start = std::chrono::steady_clock::now();
@@ -539,6 +567,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   summary.material_clusters_with_lobe = cluster_stats.clusters_with_lobe;
   summary.cluster_lobes_lent = cluster_stats.transferred;
   summary.cluster_lobes_replaced = cluster_stats.replaced;
+  summary.falloff_candidates = falloff.candidates;
+  summary.falloff_taken = falloff.taken;
   const double fits_count = double(info.texels) * ProblemsPerTexel(options.lobe_model);
   summary.fits_per_second = fit_seconds > 0 ? fits_count / fit_seconds : 0;
 
@@ -582,6 +612,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
         {"replaced", cluster_stats.replaced},
         {"sparse_assigned", cluster_stats.sparse_assigned},
         {"sparse_lent", cluster_stats.sparse_lent}}},
+      {"diffuse_falloff", FalloffJson(falloff)},
       {"albedo_fill", {{"unseen", fill.unseen}, {"filled", fill.filled}, {"rounds", fill.rounds}}},
       {"cost_percentiles", Percentiles(std::move(costs))},
       {"reduced_chi2_percentiles", Percentiles(std::move(chi2))},
@@ -623,6 +654,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                          {"lobe_transfer_read_wait", transfer_chunk_read_seconds},
                          {"lobe_transfer_test", transfer_chunk_test_seconds},
                          {"clusters", cluster_seconds},
+                         {"diffuse_falloff", falloff_seconds},
                          {"lobe_transfer_kept_mib", double(pass->cached_bytes) / (1 << 20)},
                          {"albedo_fill", fill_seconds},
                          {"write_maps", write_seconds_so_far},

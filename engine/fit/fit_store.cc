@@ -79,7 +79,7 @@ TexelFit FitStore::Get(size_t t) const {
 }
 
 void FitStore::set_donor(size_t t, int64_t donor) {
-  REFLCAP_CHECK(donor >= kClusterLobe && donor < int64_t(size())) << "donor " << donor;
+  REFLCAP_CHECK(donor >= kDiffuseFalloff && donor < int64_t(size())) << "donor " << donor;
   donor_[t] = int32_t(donor);
 }
 

@@ -38,6 +38,8 @@ class FitStore {
  public:
   static constexpr int64_t kNoDonor = -1;
   static constexpr int64_t kClusterLobe = -2;
+  // Not borrowed: the texel's own diffuse fall-off lobe (diffuse_falloff.h), fitted after the LM.
+  static constexpr int64_t kDiffuseFalloff = -3;
   // Donor indices are int32: at most this many texels (an atlas of 2^31 texels would need far
   // more memory than any machine this runs on; the status map holds donors exactly only below
   // 2^24 anyway).
@@ -68,9 +70,11 @@ class FitStore {
   int iterations(size_t t) const { return iterations_[t]; }
   float cost(size_t t) const { return cost_[t]; }
   // The texel whose lobes texel t borrowed by lobe transfer (lobe_transfer.h), kNoDonor (-1)
-  // for none, kClusterLobe (-2) for a lobe of its material cluster (material_clusters.h).
+  // for none, kClusterLobe (-2) for a lobe of its material cluster (material_clusters.h),
+  // kDiffuseFalloff (-3) for a fall-off lobe fitted after the LM (diffuse_falloff.h).
   int64_t donor(size_t t) const { return donor_[t]; }
-  // True when texel t's lobes are borrowed (from a neighbour or its cluster), not measured.
+  // True when texel t's lobes are not the LM's: borrowed (from a neighbour or its cluster) or its
+  // diffuse fall-off lobe (fitted in closed form after the LM, its sigmas unknown).
   bool borrowed(size_t t) const { return donor_[t] != kNoDonor; }
   void set_donor(size_t t, int64_t donor);
 

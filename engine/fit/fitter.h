@@ -211,6 +211,10 @@ struct FitOptions {
   LobeTransferOptions lobe_transfer;
   MaterialClusterOptions clusters;
   AlbedoFillOptions albedo_fill;
+  // Diffuse fall-off (engine/fit/diffuse_falloff.h): after the clusters, a texel still
+  // Lambert-only takes Lafortune's generalized diffuse lobe (Cx = Cy = 0) when its held-out
+  // photographs (clusters.folds folds) prefer it. Applied by RunFit, not by Fitter::Fit.
+  bool diffuse_falloff = true;
 
   Status Validate() const;
   std::string ToString() const;

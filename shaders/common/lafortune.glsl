@@ -7,8 +7,9 @@
 // wi, wo: unit vectors in the texel's tangent frame (z = shading normal), away from the surface.
 // params: [rho_d, Cx_0, Cy_0, Cz_0, n_0, Cx_1, ...] (kMaxParamsPerChannel floats; the first
 // 1 + 4 num_lobes are used). A lobe is 0 where its base b <= kPowBaseMin and kMaxLobeValue where
-// b^n exceeds it; its gradient is 0 in both cases. n must lie in [kMinExponent, kMaxExponent]
-// (the C++ DCHECKs this; here it is the caller's job).
+// b^n exceeds it; its gradient is 0 in both cases. n must lie in [kMinLobeExponent, kMaxExponent]
+// of lafortune.h, and in [kMinExponent, kMaxExponent] for the gradient (the C++ DCHECKs this;
+// here it is the caller's job).
 //
 // The products wi_j wo_j and the base are `precise` (no fused multiply-add), so the base is the
 // same float as the C++ twin's, bit for bit: b^n turns a 1-ulp difference in b into an n-fold

@@ -5,6 +5,7 @@ synthesises a small capture, resamples it, fits it and renders its holdout views
 folder; the module's readers, BRDF, fitter and renderer are checked against those files and
 against the Lafortune formula written out here.
 """
+import json
 import math
 import os
 import pathlib
@@ -323,6 +324,39 @@ def test_render_view_agrees_with_reflcap_render(data):
                                        holdout[0], mask=True)
     assert mask.shape == (SIZE, SIZE) and 0 < mask.sum() < SIZE * SIZE
     assert (pixels[mask == 0] == 0).all()
+
+
+# ---- bench/error_by_configuration.py ----------------------------------------------------------
+
+def test_error_by_configuration_accounts_for_every_sample(data, tmp_path):
+    """The script's bins hold every usable sample once, and its relative error is the one computed
+    here over the whole store at once (it reads chunk by chunk and sums bin by bin)."""
+    script = pathlib.Path(__file__).resolve().parents[2] / "bench" / "error_by_configuration.py"
+    out = tmp_path / "config.json"
+    subprocess.run(["/usr/bin/python3", str(script), str(data / "samples"), str(data / "fit"),
+                    "--json", str(out)], check=True, capture_output=True)
+    table = json.loads(out.read_text())
+
+    store = reflcap.read_samples(data / "samples")
+    fit = reflcap.read_fit(data / "fit")
+    wi, wo, y, w = store["wi"], store["wo"], store["value"], store["weight"]
+    ok = ((wi[:, 2] > store["min_cos"]) & (wo[:, 2] > store["min_cos"]) &
+          np.all(w > 0, axis=1) & np.all(np.isfinite(y), axis=1))
+    wi, wo, y = wi[ok], wo[ok], y[ok]
+    params = fit["params"].reshape(-1, fit["params"].shape[2])
+    f = reflcap.eval_brdf(params[store["atlas"]["pixel_of_texel"][store["texel"][ok]]], wi, wo)
+    cos_i = wi[:, 2:3].astype(np.float64)
+    expected = math.sqrt(np.sum(((y - f) * cos_i) ** 2) / np.sum((y * cos_i) ** 2))
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=1, keepdims=True)
+    near = int(np.sum(h[:, 2] >= math.cos(math.radians(10))))
+
+    bins = table["bins"]
+    assert sum(b["samples"] for b in bins) == ok.sum() > 1000
+    assert sum(b["samples"] for b in bins if b["theta_h_near"]) == near > 0
+    # Float32 directions and values summed in a different order: 1e-5 is far above that rounding
+    # and far below any real change of the error.
+    assert table["relative_error"] == pytest.approx(expected, rel=1e-5)
+    assert sum(b["error_share"] for b in bins) == pytest.approx(1.0, abs=1e-9)
 
 
 # ---- Errors name the file ---------------------------------------------------------------------

@@ -119,6 +119,10 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   EXPECT_GT(report["fits_per_second"].get<double>(), 0);
   EXPECT_EQ(report["options"]["albedo_fill"]["enabled"], true);
   EXPECT_EQ(report["albedo_fill"]["unseen"], 0);  // every texel has samples
+  // The diffuse fall-off pass runs by default and reports its counts and its model.
+  EXPECT_EQ(report["options"]["diffuse_falloff"], true);
+  EXPECT_TRUE(report["diffuse_falloff"].contains("candidates"));
+  EXPECT_TRUE(report["model_counts"].contains("falloff_lobe"));
   for (const char* key : {"device", "cost_percentiles", "timings_s", "options", "iterations"}) {
     EXPECT_TRUE(report.contains(key)) << key;
   }
@@ -127,12 +131,15 @@ TEST(FitCli, FitsAStoreAndWritesEveryOutput) {
   EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string(), dir).exit_code, 2);
   EXPECT_EQ(RunCli("fit " + (dir / "samples").string() + " --out " + out.string() +
                        " --overwrite --backend ceres --lobe-model shared --loss cauchy"
-                       " --no-albedo-fill --quiet",
+                       " --no-albedo-fill --no-diffuse-falloff --quiet",
                    dir).exit_code, 0);
   const Json ceres = Json::parse(ReadTextFile(out / "fit_report.json").value());
   EXPECT_EQ(ceres["backend"], "ceres");
   EXPECT_EQ(ceres["options"]["lobe_model"], "shared");
   EXPECT_EQ(ceres["options"]["albedo_fill"]["enabled"], false);
+  EXPECT_EQ(ceres["options"]["diffuse_falloff"], false);
+  EXPECT_EQ(ceres["diffuse_falloff"]["candidates"], 0);
+  EXPECT_EQ(ceres["model_counts"]["falloff_lobe"], 0);
 }
 
 // --lobe-model auto: each texel keeps the anisotropic or the isotropic fit, the better by BIC.
