@@ -91,7 +91,8 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
   std::array<std::atomic<size_t>, kN> by_exponent{};
   // 64 texels per task: each is a few passes over its ~20-500 samples.
   ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
-    // Per texel: [fold][exponent][channel] sums (exponent kN: Lambert, b unused).
+    // Per texel: [fold][exponent][channel] sums. Lambert reads exponent 0's (its w, wy, wyy do
+    // not depend on b).
     std::vector<Sums> sums;
     for (int64_t ii = begin; ii < end; ++ii) {
       const uint32_t i = uint32_t(ii);
