@@ -40,9 +40,9 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
                 "do not cluster texels by albedo to lend the texels still without a lobe one "
                 "that the pooled samples of their material support");
   args->AddFlag("no-diffuse-falloff", &no_diffuse_falloff,
-                "keep Lambert-only the texels without a lobe instead of letting them take a "
-                "generalized diffuse lobe (Cx = Cy = 0: darker towards grazing light) where "
-                "their own held-out photographs prefer it");
+                "do not offer the texels without a lobe of their own (Lambert-only, or one "
+                "borrowed) a generalized diffuse lobe (Cx = Cy = 0: darker towards grazing "
+                "light) where their own held-out photographs prefer it");
   args->AddInt("max-material-clusters", &options->clusters.max_clusters,
                "material clusters: at most N (default 64)");
   args->AddString("model-choice", &model_choice, "NAME",
@@ -204,8 +204,10 @@ int RunFit(int argc, char** argv) {
                 summary->material_clusters_with_lobe, summary->cluster_lobes_lent,
                 summary->cluster_lobes_replaced);
     if (options.diffuse_falloff) {
-      std::printf("  diffuse fall-off lobe: %zu of %zu Lambert-only texels\n",
-                  summary->falloff_taken, summary->falloff_candidates);
+      std::printf("  diffuse fall-off lobe: %zu of %zu texels tested (%zu in place of a borrowed "
+                  "lobe)\n",
+                  summary->falloff_taken, summary->falloff_candidates,
+                  summary->falloff_replaced);
     }
   }
   return 0;

@@ -68,9 +68,15 @@ Coefficients SolveFalloff(const Sums& s) {
   return s.Cost(lobe.a, lobe.b) < s.Cost(lambert.a, lambert.b) ? lobe : lambert;
 }
 
+// A lobe lent by a neighbour or the texel's cluster (not one it fitted itself).
+bool Borrowed(const FitStore& fits, size_t t) {
+  return fits.donor(t) >= 0 || fits.donor(t) == FitStore::kClusterLobe;
+}
+
 bool Candidate(const FitStore& fits, size_t t) {
-  return fits.lambert_only(t) && fits.donor(t) == FitStore::kNoDonor &&
-         fits.status(t) != FitStatus::kNonFiniteInput && fits.samples(t) >= kMinTransferSamples;
+  const bool lambert = fits.lambert_only(t) && fits.donor(t) == FitStore::kNoDonor;
+  return (lambert || Borrowed(fits, t)) && fits.status(t) != FitStatus::kNonFiniteInput &&
+         fits.samples(t) >= kMinTransferSamples;
 }
 
 }  // namespace
@@ -87,13 +93,13 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
   REFLCAP_CHECK(fits->lobes() >= 1) << "the fall-off lobe needs a lobe slot";
   REFLCAP_CHECK(folds >= 2 && folds <= kMaxModelFolds) << "folds " << folds;
   constexpr int kN = kFalloffExponentCount;
-  std::atomic<size_t> candidates{0}, taken{0};
+  std::atomic<size_t> candidates{0}, taken{0}, replaced{0};
   std::array<std::atomic<size_t>, kN> by_exponent{};
   // 64 texels per task: each is a few passes over its ~20-500 samples.
   ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
-    // Per texel: [fold][exponent][channel] sums. Lambert reads exponent 0's (its w, wy, wyy do
-    // not depend on b).
-    std::vector<Sums> sums;
+    // Per texel: [fold][exponent][channel] sums (Lambert reads exponent 0's: its w, wy, wyy do
+    // not depend on b), and for a borrowed lobe [fold][channel] sums of y minus the lobe.
+    std::vector<Sums> sums, current;
     for (int64_t ii = begin; ii < end; ++ii) {
       const uint32_t i = uint32_t(ii);
       const size_t t = size_t(chunk.first_texel) + i;
@@ -101,6 +107,9 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       const BrdfSample* samples = chunk.SamplesOf(i);
       const size_t count = chunk.SampleCount(i);
       sums.assign(size_t(folds) * kN * brdf::kChannels, Sums{});
+      current.assign(size_t(folds) * brdf::kChannels, Sums{});
+      const bool borrowed = Borrowed(*fits, t);
+      const brdf::BrdfParams lent = fits->Get(t).params;
       std::array<double, brdf::kChannels> brightest{};
       std::array<bool, kMaxModelFolds> held{};
       for (size_t s = 0; s < count; ++s) {
@@ -119,6 +128,11 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
           for (int k = 0; k < kN; ++k) {
             sums[(size_t(f) * kN + size_t(k)) * brdf::kChannels + size_t(c)].Add(w, b[size_t(k)], y);
           }
+          if (borrowed) {
+            const auto lobes = LobeChannel(&lent, c);
+            const double lobe = brdf::EvalChannel(u.wi, u.wo, lobes.data(), lent.num_lobes);
+            current[size_t(f) * brdf::kChannels + size_t(c)].Add(w, 0.0, y - lobe);
+          }
         }
       }
       // Every fold must hold samples, so that every candidate is scored on each.
@@ -132,8 +146,16 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
           total[j] = total[j].Plus(s);
         }
       }
-      // Held-out costs: Lambert (exponent 0's sums, B = 0) and each exponent.
-      double lambert_cv = 0;
+      // Held-out costs: the texel's model now — Lambert (exponent 0's sums, B = 0), or its
+      // borrowed lobe with the albedo re-fitted per fold — and each exponent.
+      std::array<Sums, brdf::kChannels> current_total{};
+      for (int f = 0; f < folds; ++f) {
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          current_total[size_t(c)] =
+              current_total[size_t(c)].Plus(current[size_t(f) * brdf::kChannels + size_t(c)]);
+        }
+      }
+      double current_cv = 0;
       std::array<double, kN> falloff_cv{};
       for (int f = 0; f < folds; ++f) {
         for (int k = 0; k < kN; ++k) {
@@ -143,16 +165,23 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
             const Sums train = total[j].Minus(held_out);
             const Coefficients m = SolveFalloff(train);
             falloff_cv[size_t(k)] += held_out.Cost(m.a, m.b);
-            if (k == 0) {
+            if (k == 0 && !borrowed) {
               const Coefficients l = SolveLambert(train);
-              lambert_cv += held_out.Cost(l.a, l.b);
+              current_cv += held_out.Cost(l.a, l.b);
+            } else if (k == 0) {
+              const Sums& held_lobe = current[size_t(f) * brdf::kChannels + size_t(c)];
+              const Coefficients l = SolveLambert(current_total[size_t(c)].Minus(held_lobe));
+              current_cv += held_lobe.Cost(l.a, l.b);
             }
           }
         }
       }
+      const double margin = borrowed
+                                ? std::max(kFalloffMargin, kBorrowedFalloffMargin * current_cv)
+                                : kFalloffMargin;
       int best = -1;
       for (int k = 0; k < kN; ++k) {
-        if (!(falloff_cv[size_t(k)] < lambert_cv - kFalloffMargin)) continue;
+        if (!(falloff_cv[size_t(k)] < current_cv - margin)) continue;
         if (best < 0 || falloff_cv[size_t(k)] < falloff_cv[size_t(best)]) best = k;
       }
       if (best < 0) continue;
@@ -173,6 +202,10 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
         // B = Cz^n: Cz = B^(1/n), 0 for a channel without lobe (b = 0: the lobe is cut off).
         fit.params.lobes[0][size_t(c)] = brdf::LobeParams{0.0f, 0.0f, float(std::pow(m.b, 1.0 / n)),
                                                           float(n)};
+        // A borrowed model's further lobes go with it: the fall-off lobe replaces it.
+        for (int k = 1; k < fit.params.num_lobes; ++k) {
+          fit.params.lobes[size_t(k)][size_t(c)] = brdf::LobeParams{0.0f, 0.0f, 0.0f, 1.0f};
+        }
       }
       if (!within_evidence || !any_lobe) continue;
       fit.cost = float(cost);
@@ -180,11 +213,13 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       fits->Set(t, fit);
       fits->set_donor(t, FitStore::kDiffuseFalloff);
       ++taken;
+      replaced += borrowed;
       ++by_exponent[size_t(best)];
     }
   }, options.threads);
   stats->candidates += candidates;
   stats->taken += taken;
+  stats->replaced += replaced;
   for (int k = 0; k < kN; ++k) stats->by_exponent[size_t(k)] += by_exponent[size_t(k)];
 }
 

@@ -174,7 +174,8 @@ Json FalloffJson(const DiffuseFalloffStats& s) {
     name << kFalloffExponents[size_t(k)];
     by[name.str()] = s.by_exponent[size_t(k)];
   }
-  return {{"candidates", s.candidates}, {"taken", s.taken}, {"by_exponent", by}};
+  return {{"candidates", s.candidates}, {"taken", s.taken}, {"replaced", s.replaced},
+          {"by_exponent", by}};
 }
 
 // Decoded sample chunks RunFit keeps in memory for lobe transfer: a quarter of the machine's
@@ -519,8 +520,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
         }));
   }
   const double cluster_seconds = Seconds(cluster_start);
-  // Diffuse fall-off (diffuse_falloff.h): the texels still Lambert-only may take a generalized
-  // diffuse lobe, when their own held-out photographs prefer it.
+  // Diffuse fall-off (diffuse_falloff.h): the texels still Lambert-only, or holding a borrowed
+  // lobe, may take a generalized diffuse lobe, when their own held-out photographs prefer it.
   const auto falloff_start = std::chrono::steady_clock::now();
   DiffuseFalloffStats falloff;
   if (options.diffuse_falloff && options.lobes > 0) {
@@ -569,6 +570,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   summary.cluster_lobes_replaced = cluster_stats.replaced;
   summary.falloff_candidates = falloff.candidates;
   summary.falloff_taken = falloff.taken;
+  summary.falloff_replaced = falloff.replaced;
   const double fits_count = double(info.texels) * ProblemsPerTexel(options.lobe_model);
   summary.fits_per_second = fit_seconds > 0 ? fits_count / fit_seconds : 0;
 

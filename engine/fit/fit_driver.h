@@ -41,8 +41,9 @@ struct FitRunSummary {
   int material_clusters_with_lobe = 0;
   size_t cluster_lobes_lent = 0;      // Lambert-only texels that took their cluster's lobe
   size_t cluster_lobes_replaced = 0;  // texels whose own or borrowed lobe gave way to it
-  size_t falloff_candidates = 0;      // diffuse fall-off: Lambert-only texels tested
+  size_t falloff_candidates = 0;      // diffuse fall-off: texels tested
   size_t falloff_taken = 0;           // of those, texels that took the fall-off lobe
+  size_t falloff_replaced = 0;        // of those, texels whose borrowed lobe it replaced
 };
 
 // Which model a texel's final parameters are (status.exr `model`, fit_report.json
@@ -57,7 +58,7 @@ enum class TexelModel {
   kNeighbourLobe = 3,
   kClusterLobe = 4,
   kNoSamples = 5,
-  kFalloffLobe = 6,  // Lambert-only until its own diffuse fall-off lobe (diffuse_falloff.h)
+  kFalloffLobe = 6,  // its own diffuse fall-off lobe (diffuse_falloff.h)
 };
 constexpr int kTexelModelCount = 7;
 extern const char* const kTexelModelNames[kTexelModelCount];
@@ -92,8 +93,8 @@ StatusOr<FitRunSummary> RunFit(const std::filesystem::path& samples,
 // `reflcap merge` of fit parts: checks that `parts` are the shards 0..N-1 of one fit (one store
 // fingerprint, the same options, backend and N, each shard once, their chunk ranges tiling the
 // store), reads every chunk result file, then runs the post-fit phase (lobe transfer, albedo
-// fill, material clusters, diffuse fall-off, maps) on the whole atlas exactly as RunFit does, into `out`: maps
-// bit-identical to a single run's. The store is read from `samples` when given, else from the
+// fill, material clusters, diffuse fall-off, maps) on the whole atlas exactly as RunFit does,
+// into `out`: maps bit-identical to a single run's. The store is read from `samples` when given, else from the
 // path the parts record. Errors (nothing written): FailedPrecondition for parts that do not
 // belong together, naming the part and the field; NotFound/DataLoss for a missing or corrupt
 // part file or chunk result file, naming it.
