@@ -50,9 +50,9 @@ constexpr int kMaxParamsPerChannel = ParamsPerChannel(kMaxLobes);
 constexpr double kMinExponent = 1.0;
 // The generalized diffuse lobe (Cx = Cy = 0) is no glossy lobe: (Cz cos theta_i cos theta_o)^n
 // with n < 1 darkens a surface towards grazing light and view without the sharp cut-off of
-// n >= 1 (DiLiGenT pot1 and cat choose n = 0.25-0.75 for a third of their texels). Its value is
-// finite and continuous for every n > 0 (b^n -> 0 as b -> 0+); 0.25 is the smallest exponent
-// engine/fit/diffuse_falloff.h tries. Its gradient is never taken (it is not fitted by LM).
+// n >= 1 (DiLiGenT pot1 and cat choose n = 0.25-0.75 for 47 % and 40 % of their texels). Its
+// value is finite and continuous for every n > 0 (b^n -> 0 as b -> 0+); 0.25 is the smallest
+// exponent engine/fit/diffuse_falloff.h tries. Its gradient is never taken (not fitted by LM).
 constexpr double kMinLobeExponent = 0.25;
 // n = 1e4 gives a lobe about 1/sqrt(n) = 0.01 rad (0.6 degrees) wide, narrower than a capture's
 // angular resolution (light source and pixel footprints ~1 degree). It also bounds float error:
