@@ -127,12 +127,14 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       sums.assign(size_t(folds) * kN * brdf::kChannels, Sums{});
       current.assign(size_t(folds) * brdf::kChannels, Sums{});
       const bool borrowed = Borrowed(*fits, t);
+      // The texel's fit now: a borrowed model's lobes are scored from it, and a winner is
+      // written over it.
+      TexelFit fit = fits->Get(t);
       // A borrowed model's lobes per channel (albedo slot zeroed), taken once per texel.
       std::array<std::array<float, brdf::kMaxParamsPerChannel>, brdf::kChannels> lent{};
-      const int lent_lobes = borrowed ? fits->lobes() : 0;
+      const int lent_lobes = borrowed ? fit.params.num_lobes : 0;
       if (borrowed) {
-        const brdf::BrdfParams params = fits->Get(t).params;
-        for (int c = 0; c < brdf::kChannels; ++c) lent[size_t(c)] = LobeChannel(&params, c);
+        for (int c = 0; c < brdf::kChannels; ++c) lent[size_t(c)] = LobeChannel(&fit.params, c);
       }
       std::array<double, brdf::kChannels> brightest{};
       std::array<bool, kMaxModelFolds> held{};
@@ -210,7 +212,6 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       // The winner on all samples; its lobe within the evidence bound in every channel (B is the
       // lobe's supremum, reached at normal light and view).
       const double n = kFalloffExponents[size_t(best)];
-      TexelFit fit = fits->Get(t);
       bool within_evidence = true;
       double cost = 0;
       bool any_lobe = false;
