@@ -506,13 +506,19 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   MaterialClusterStats cluster_stats;
   MaterialClusters clusters = BuildMaterialClusters(fits, options.clusters, &cluster_stats);
   AssignSparseTexels(fits, albedo_filled, options.clusters, &clusters, &cluster_stats);
+  double cluster_build_seconds = Seconds(cluster_start), cluster_pool_seconds = 0,
+         cluster_choose_seconds = 0;
   if (clusters.count > 0) {
+    auto part_start = std::chrono::steady_clock::now();
     REFLCAP_RETURN_IF_ERROR(visit_chunks(
         [&](uint64_t first, uint64_t end) { return clusters.PoolIn(first, end); },
         [&](const TexelSampleChunk& chunk) {
           StashClusterSamples(chunk, options.min_cos_theta, &clusters);
         }));
+    cluster_pool_seconds = Seconds(part_start);
+    part_start = std::chrono::steady_clock::now();
     ChooseClusterLobes(options, &clusters, &cluster_stats);
+    cluster_choose_seconds = Seconds(part_start);
     REFLCAP_RETURN_IF_ERROR(visit_chunks(
         [&](uint64_t first, uint64_t end) { return clusters.KeptIn(first, end); },
         [&](const TexelSampleChunk& chunk) {
@@ -612,6 +618,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
         {"rejected", cluster_stats.rejected},
         {"transferred", cluster_stats.transferred},
         {"replaced", cluster_stats.replaced},
+        {"kfold_refit", cluster_stats.kfold_refit},
+        {"kfold_refits", cluster_stats.kfold_refits},
         {"sparse_assigned", cluster_stats.sparse_assigned},
         {"sparse_lent", cluster_stats.sparse_lent}}},
       {"diffuse_falloff", FalloffJson(falloff)},
@@ -656,6 +664,10 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                          {"lobe_transfer_read_wait", transfer_chunk_read_seconds},
                          {"lobe_transfer_test", transfer_chunk_test_seconds},
                          {"clusters", cluster_seconds},
+                         {"clusters_build", cluster_build_seconds},
+                         {"clusters_pool", cluster_pool_seconds},
+                         {"clusters_choose", cluster_choose_seconds},
+                         {"clusters_kfold_refit", cluster_stats.refit_seconds},
                          {"diffuse_falloff", falloff_seconds},
                          {"lobe_transfer_kept_mib", double(pass->cached_bytes) / (1 << 20)},
                          {"albedo_fill", fill_seconds},

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -604,16 +605,17 @@ double CrossValidatedLobeCost(const BrdfSample* samples, size_t count, const Usa
   return cost;
 }
 
-// The held-out cost of fits made without each fold: fold f's samples under fold_fit[f].
-double HeldOutFitCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
-                      const std::vector<const brdf::BrdfParams*>& fold_fit, int folds) {
+// Fold f's held-out cost under `fit` (a fit made without fold f): 1/2 sum w (y - f)^2 over the
+// fold's samples and every channel.
+double FoldHeldOutCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
+                       const brdf::BrdfParams& fit, int folds, int f) {
   double cost = 0;
-  for (size_t i = 0; i < count; ++i) {
-    const brdf::BrdfParams& p = *fold_fit[size_t(FoldOf(samples[i], folds))];
-    for (int c = 0; c < brdf::kChannels; ++c) {
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    const auto channel = fit.Channel(c);  // the whole model: albedo and lobes
+    for (size_t i = 0; i < count; ++i) {
+      if (FoldOf(samples[i], folds) != f) continue;
       double w, e;
-      const auto channel = p.Channel(c);  // the whole model: albedo and lobes
-      if (ChannelResidual(samples[i], usable[i], c, channel.data(), p.num_lobes, &w, &e)) {
+      if (ChannelResidual(samples[i], usable[i], c, channel.data(), fit.num_lobes, &w, &e)) {
         cost += 0.5 * w * e * e;
       }
     }
@@ -635,10 +637,13 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   // k-fold: the texels with a lobe of their own that a cluster offers lobes to are fitted again
   // without each fold (the CPU batched fitter, whatever backend made the fit: every backend then
   // gets the same choice from the same fits).
-  std::vector<int32_t> refit_index(chunk.texel_count, -1);
-  std::vector<std::vector<TexelFit>> fold_fits(size_t(std::max(folds, 0)));
+  // Per texel that takes the k-fold branch below: the best kept lobe's held-out cost and its
+  // index in kept[k] (-1: none scored), and for an own lobe its own held-out cost (refitted).
+  std::vector<double> best_cv(folds > 0 ? chunk.texel_count : 0);
+  std::vector<int16_t> best_lobe(folds > 0 ? chunk.texel_count : 0, -1);
+  std::vector<double> own_cv(folds > 0 ? chunk.texel_count : 0);
   if (folds > 0) {
-    // Which texels need the refits (in parallel; gathered in texel order below).
+    // The cluster lobes' scores first (in parallel), and which texels need the refits.
     std::vector<uint8_t> needs_refit(chunk.texel_count, 0);
     ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
       std::vector<UsableSample> usable;
@@ -646,29 +651,49 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         const uint32_t i = uint32_t(ii);
         const size_t t = size_t(chunk.first_texel) + i;
         const int32_t k = clusters.LenderOf(t);
-        if (k < 0 || fits->status(t) == FitStatus::kNonFiniteInput || fits->lambert_only(t) ||
-            fits->donor(t) != FitStore::kNoDonor || fits->samples(t) < kMinTransferSamples) {
+        // The texels that take the k-fold branch of the pass below: with a lobe (own or
+        // borrowed), enough samples, a cluster that kept lobes.
+        if (k < 0 || clusters.kept[size_t(k)].empty() ||
+            fits->status(t) == FitStatus::kNonFiniteInput || fits->lambert_only(t) ||
+            fits->donor(t) == FitStore::kClusterLobe || fits->samples(t) < kMinTransferSamples) {
           continue;
         }
         const BrdfSample* samples = chunk.SamplesOf(i);
-        usable.resize(chunk.SampleCount(i));
-        for (size_t s = 0; s < usable.size(); ++s) {
+        const size_t count = chunk.SampleCount(i);
+        usable.resize(count);
+        for (size_t s = 0; s < count; ++s) {
           usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
         }
-        if (!EveryFoldHeld(samples, usable.size(), usable.data(), folds)) continue;
-        needs_refit[i] = 1;
+        if (!EveryFoldHeld(samples, count, usable.data(), folds)) continue;
+        double best = std::numeric_limits<double>::infinity();
+        const auto& kept = clusters.kept[size_t(k)];
+        for (size_t j = 0; j < kept.size(); ++j) {
+          const double cv = CrossValidatedLobeCost(samples, count, usable.data(), &kept[j], folds);
+          if (std::isfinite(cv) && cv < best) {
+            best = cv;
+            best_lobe[i] = int16_t(j);
+          }
+        }
+        best_cv[i] = best;
+        // An own lobe is refitted without each fold (a borrowed one is scored below with its
+        // albedo re-fitted); with no kept lobe scored the own lobe stays, and needs no refit.
+        needs_refit[i] = fits->donor(t) == FitStore::kNoDonor && best_lobe[i] >= 0;
       }
     }, options.threads);
     std::vector<uint32_t> refit;
     for (uint32_t i = 0; i < chunk.texel_count; ++i) {
-      if (!needs_refit[i]) continue;
-      refit_index[i] = int32_t(refit.size());
-      refit.push_back(i);
+      if (needs_refit[i]) refit.push_back(i);
     }
+    stats->kfold_refit += refit.size();
     if (!refit.empty()) {
+      // Fold by fold. Each fold adds a cost >= 0 to the texel's own score, so once the sum so far
+      // exceeds the cluster lobe's score by the margin the cluster lobe wins whatever the other
+      // folds add: such texels are not refitted for them (the same choice, in ~half the refits).
+      const auto refit_start = std::chrono::steady_clock::now();
       auto fitter = CreateFitter(Backend::kCpu, options.threads);
       REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
-      for (int f = 0; f < folds; ++f) {
+      std::vector<TexelFit> fold_fit;
+      for (int f = 0; f < folds && !refit.empty(); ++f) {
         TexelSampleChunk train;
         train.first_texel = 0;
         train.texel_count = uint32_t(refit.size());
@@ -680,9 +705,31 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
           }
           train.offsets.push_back(train.samples.size());
         }
-        const Status fitted = (*fitter)->Fit(train, options, &fold_fits[size_t(f)]);
+        const Status fitted = (*fitter)->Fit(train, options, &fold_fit);
         REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
+        stats->kfold_refits += refit.size();
+        ParallelFor(0, int64_t(refit.size()), 64, [&](int64_t begin, int64_t end, int) {
+          std::vector<UsableSample> usable;
+          for (int64_t j = begin; j < end; ++j) {
+            const uint32_t i = refit[size_t(j)];
+            const BrdfSample* samples = chunk.SamplesOf(i);
+            usable.resize(chunk.SampleCount(i));
+            for (size_t s = 0; s < usable.size(); ++s) {
+              usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
+            }
+            own_cv[i] += FoldHeldOutCost(samples, usable.size(), usable.data(),
+                                         fold_fit[size_t(j)].params, folds, f);
+          }
+        }, options.threads);
+        if (!options.clusters.stop_decided_refits) continue;
+        size_t kept_refits = 0;
+        for (uint32_t i : refit) {
+          if (!(best_cv[i] < own_cv[i] - kKFoldMargin)) refit[kept_refits++] = i;
+        }
+        refit.resize(kept_refits);
       }
+      stats->refit_seconds +=
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - refit_start).count();
     }
   }
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
@@ -735,27 +782,16 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       if (folds > 0 && !lambert_only && EveryFoldHeld(samples, count, usable.data(), folds)) {
         // A texel with a lobe: the cluster's lobe replaces it when it predicts the texel's
         // held-out photographs better (k-fold), the texel's own lobe fitted without each fold.
-        double own_cv;
-        if (refit_index[size_t(i)] >= 0) {
-          std::vector<const brdf::BrdfParams*> per_fold(static_cast<size_t>(folds));
-          for (int f = 0; f < folds; ++f) {
-            per_fold[size_t(f)] = &fold_fits[size_t(f)][size_t(refit_index[size_t(i)])].params;
-          }
-          own_cv = HeldOutFitCost(samples, count, usable.data(), per_fold, folds);
-        } else {  // a neighbour's lobe: its shape was not fitted to these samples
-          own_cv = CrossValidatedLobeCost(samples, count, usable.data(), &fit.params, folds);
-        }
-        double best_cv = std::numeric_limits<double>::infinity();
-        const brdf::BrdfParams* best = nullptr;
-        for (const brdf::BrdfParams& lobe : clusters.kept[size_t(k)]) {
-          const double cv = CrossValidatedLobeCost(samples, count, usable.data(), &lobe, folds);
-          if (std::isfinite(cv) && cv < best_cv) {
-            best_cv = cv;
-            best = &lobe;
-          }
-        }
+        if (best_lobe[size_t(i)] < 0) continue;  // no kept lobe scored: the lobe stays
+        const brdf::BrdfParams* best = &clusters.kept[size_t(k)][size_t(best_lobe[size_t(i)])];
+        // An own lobe's score comes from the refits above; a neighbour's lobe was not fitted to
+        // these samples, so only its albedo is re-fitted per fold.
+        const double own_score =
+            fits->donor(t) == FitStore::kNoDonor
+                ? own_cv[size_t(i)]
+                : CrossValidatedLobeCost(samples, count, usable.data(), &fit.params, folds);
         // Ties (both predictions exact to rounding) keep the texel's own measurement.
-        if (best == nullptr || !(best_cv < own_cv - kKFoldMargin)) continue;
+        if (!(best_cv[size_t(i)] < own_score - kKFoldMargin)) continue;
         const double cost = RefitAlbedoCost(samples, count, usable.data(), best, &rho);
         fit.params.lobes = best->lobes;
         fit.params.rho_d = rho;
