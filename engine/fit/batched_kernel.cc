@@ -169,9 +169,40 @@ REFLCAP_AI void Kernel(LossKind loss, LaneBatch* b) {
   Store(cost, b->cost);
 }
 
+// EvaluateLobeSum's body: kLanes samples per step, exp(n log b) per lobe as the LM's lanes form
+// it (model.h LobeValueAndSlopes), in natural units: saturated at brdf::kMaxLobeValue (the
+// exponent argument capped just above log of it, so exp never overflows), cut off at
+// kPowBaseMin, and floored at kMinLobeLogArg (1.8e-35: below any value a cost can tell, and
+// it keeps the vector expf off its scalar underflow path).
+template <int W>
+REFLCAP_AI void LobeSum(const float* xx, const float* yy, const float* zz, size_t padded,
+                        const float* channel, int lobes, float* out) {
+  using P4 = Pack<W>;
+  constexpr double kMaxArg = 70.08;  // log(brdf::kMaxLobeValue) = 69.08, + 1: exp stays finite
+  static_assert(brdf::kMaxLobeValue == 1e30, "kMaxArg is log(kMaxLobeValue) + 1");
+  for (size_t i = 0; i < padded; i += kLanes) {
+    const P4 x = Load<W>(xx + i), y = Load<W>(yy + i), z = Load<W>(zz + i);
+    P4 sum(0.0);
+    for (int k = 0; k < lobes; ++k) {
+      const float* lobe = channel + 1 + 4 * k;
+      const P4 base = P4(lobe[0]) * x + P4(lobe[1]) * y + P4(lobe[2]) * z;
+      const P4 safe_base = Select(base > P4(kPowBaseMin), base, P4(1.0));
+      const P4 arg0 = P4(lobe[3]) * log(safe_base);
+      P4 arg = Select(arg0 > P4(kMaxArg), P4(kMaxArg), arg0);
+      arg = Select(arg < P4(kMinLobeLogArg), P4(kMinLobeLogArg), arg);
+      const P4 raw = Select(base > P4(kPowBaseMin), exp(arg), P4(0.0));
+      sum += Select(P4(brdf::kMaxLobeValue) > raw, raw, P4(brdf::kMaxLobeValue));
+    }
+    Store(sum, out + i);
+  }
+}
+
 using KernelFn = void (*)(LossKind, LaneBatch*);
+using LobeSumFn = void (*)(const float*, const float*, const float*, size_t, const float*, int,
+                           float*);
 struct KernelTable {
   KernelFn aniso[4], iso[4], shared[3];
+  LobeSumFn lobe_sum;
   const char* isa;
 };
 
@@ -182,13 +213,18 @@ struct KernelTable {
   ATTR __attribute__((flatten)) void NAME(LossKind loss, LaneBatch* b) {                        \
     Kernel<M, K, W>(loss, b);                                                                   \
   }                                                                                             \
+  ATTR __attribute__((flatten)) void NAME##LobeSum(const float* xx, const float* yy,            \
+                                                   const float* zz, size_t padded,              \
+                                                   const float* channel, int lobes, float* out) { \
+    LobeSum<W>(xx, yy, zz, padded, channel, lobes, out);                                        \
+  }                                                                                             \
   const KernelTable NAME##Table = {                                                             \
       {NAME<LobeModel::kAniso, 0>, NAME<LobeModel::kAniso, 1>, NAME<LobeModel::kAniso, 2>,      \
        NAME<LobeModel::kAniso, 3>},                                                             \
       {NAME<LobeModel::kIso, 0>, NAME<LobeModel::kIso, 1>, NAME<LobeModel::kIso, 2>,            \
        NAME<LobeModel::kIso, 3>},                                                               \
       {NAME<LobeModel::kShared, 0>, NAME<LobeModel::kShared, 1>, NAME<LobeModel::kShared, 2>}, \
-      ISA};
+      NAME##LobeSum, ISA};
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 REFLCAP_KERNEL_SET(__attribute__((target("arch=x86-64-v4"))), 16, KernelV4, "x86-64-v4")
@@ -215,6 +251,13 @@ void EvaluateLanes(const ProblemLayout& layout, LossKind loss, LaneBatch* batch)
     case LobeModel::kIso: return t.iso[layout.lobes](loss, batch);
     case LobeModel::kShared: return t.shared[layout.lobes](loss, batch);
   }
+}
+
+void EvaluateLobeSum(const float* xx, const float* yy, const float* zz, size_t padded,
+                     const float* channel, int lobes, float* out) {
+  REFLCAP_DCHECK(padded % kLanes == 0) << padded;
+  REFLCAP_DCHECK(lobes >= 0 && lobes <= brdf::kMaxLobes) << lobes;
+  Kernels().lobe_sum(xx, yy, zz, padded, channel, lobes, out);
 }
 
 const char* LaneKernelIsa() { return Kernels().isa; }

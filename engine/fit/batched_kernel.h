@@ -45,6 +45,14 @@ struct LaneBatch {
 void EvaluateLanes(const ProblemLayout& layout, LossKind loss, LaneBatch* batch);
 
 // The instruction set the dispatcher picked: "x86-64-v4", "x86-64-v3" or "x86-64".
+// out[i] = the summed lobes of one channel (EvalChannel layout, the albedo slot ignored) at the
+// direction products (xx, yy, zz)[i] (wi_j wo_j), for i < padded, a multiple of kLanes: with
+// the vector exp and log of LaneKernelIsa() (exp(n log b), a few float ulps from
+// brdf::EvalChannel's pow), natural units, 0 where a lobe is cut off, kMaxLobeValue where
+// saturated. For the post-fit lobe tests, which evaluate every candidate lobe at every sample.
+void EvaluateLobeSum(const float* xx, const float* yy, const float* zz, size_t padded,
+                     const float* channel, int lobes, float* out);
+
 const char* LaneKernelIsa();
 
 }  // namespace reflcap::fit

@@ -118,44 +118,43 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
     // Per texel: [fold][exponent][channel] sums (Lambert reads exponent 0's: its w, wy, wyy do
     // not depend on b), and for a borrowed lobe [fold][channel] sums of y minus the lobe.
     std::vector<Sums> sums, current;
+    TexelResiduals residuals;
+    std::vector<std::array<double, kN>> bases;
     for (int64_t ii = begin; ii < end; ++ii) {
       const uint32_t i = uint32_t(ii);
       const size_t t = size_t(chunk.first_texel) + i;
       if (!Candidate(*fits, t)) continue;
-      const BrdfSample* samples = chunk.SamplesOf(i);
-      const size_t count = chunk.SampleCount(i);
       sums.assign(size_t(folds) * kN * brdf::kChannels, Sums{});
       current.assign(size_t(folds) * brdf::kChannels, Sums{});
       const bool borrowed = Borrowed(*fits, t);
       // The texel's fit now: a borrowed model's lobes are scored from it, and a winner is
       // written over it.
       TexelFit fit = fits->Get(t);
-      // A borrowed model's lobes per channel (albedo slot zeroed), taken once per texel.
-      std::array<std::array<float, brdf::kMaxParamsPerChannel>, brdf::kChannels> lent{};
-      const int lent_lobes = borrowed ? fit.params.num_lobes : 0;
-      if (borrowed) {
-        for (int c = 0; c < brdf::kChannels; ++c) lent[size_t(c)] = LobeChannel(&fit.params, c);
+      residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
+      const size_t usable = residuals.usable();
+      bases.resize(usable);
+      for (size_t j = 0; j < usable; ++j) {
+        // x = cos theta_i cos theta_o > min_cos_theta^2 > 0 for a usable sample.
+        bases[j] = FalloffBases(double(residuals.zz()[j]));
       }
       std::array<double, brdf::kChannels> brightest{};
       std::array<bool, kMaxModelFolds> held{};
-      for (size_t s = 0; s < count; ++s) {
-        const UsableSample u = PrepareUsableSample(samples[s], options.min_cos_theta);
-        if (!u.usable) continue;
-        // x = cos theta_i cos theta_o > min_cos_theta^2 > 0 for a usable sample.
-        const double x = double(u.wi[2]) * double(u.wo[2]);
-        const int f = PhotographFold(samples[s].image, folds);
-        const std::array<double, kN> b = FalloffBases(x);
-        for (int c = 0; c < brdf::kChannels; ++c) {
-          const double w = samples[s].weight[c], y = samples[s].value[c];
-          if (!(w > 0) || !std::isfinite(w) || !std::isfinite(y)) continue;
-          held[size_t(f)] = true;
-          brightest[size_t(c)] = std::max(brightest[size_t(c)], y);
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        // A borrowed model's lobes in this channel at every sample (its albedo ignored).
+        const float* lobe = borrowed ? residuals.Lobes(&fit.params, c) : nullptr;
+        const float* w = residuals.w(c);
+        const float* y = residuals.y(c);
+        for (size_t j = 0; j < usable; ++j) {
+          if (!(w[j] > 0)) continue;  // no residual in this channel
+          const size_t f = residuals.fold()[j];
+          held[f] = true;
+          brightest[size_t(c)] = std::max(brightest[size_t(c)], double(y[j]));
           for (int k = 0; k < kN; ++k) {
-            sums[(size_t(f) * kN + size_t(k)) * brdf::kChannels + size_t(c)].Add(w, b[size_t(k)], y);
+            sums[(f * kN + size_t(k)) * brdf::kChannels + size_t(c)].Add(w[j], bases[j][size_t(k)],
+                                                                         y[j]);
           }
           if (borrowed) {
-            const double lobe = brdf::EvalChannel(u.wi, u.wo, lent[size_t(c)].data(), lent_lobes);
-            current[size_t(f) * brdf::kChannels + size_t(c)].Add(w, 0.0, y - lobe);
+            current[f * brdf::kChannels + size_t(c)].Add(w[j], 0.0, double(y[j]) - double(lobe[j]));
           }
         }
       }

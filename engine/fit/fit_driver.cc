@@ -107,7 +107,7 @@ TexelModel TexelModelOf(const FitStore& fits, size_t t) {
 
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled,
-                    const std::vector<int32_t>& cluster_of) {
+                    const std::vector<int32_t>& cluster_of, int threads) {
   REFLCAP_CHECK(fits->size() == atlas.TexelCount());
   REFLCAP_CHECK(sigma->lobes() == fits->lobes());
   REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits->size());
@@ -134,7 +134,8 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     }
     REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "status.exr", status,
                                              {"status", "iterations", "cost", "lobe_donor",
-                                              "albedo_filled", "material_cluster", "model"}));
+                                              "albedo_filled", "material_cluster", "model"},
+                                             ExrPixelType::kFloat, threads));
   }
   const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
   const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
@@ -147,7 +148,8 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     }
     // The parameters are in the image now: freed before it is written.
     fits->ReleaseParams();
-    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "params.exr", params, names, ExrPixelType::kFloat));
+    REFLCAP_RETURN_IF_ERROR(
+        WriteExrChannels(dir / "params.exr", params, names, ExrPixelType::kFloat, threads));
   }
   Image sigmas(atlas.width, atlas.height, n, 0.0f);
   REFLCAP_RETURN_IF_ERROR(sigma->ReadAll([&](size_t t, const float* in) {
@@ -161,7 +163,7 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
       for (int c = 0; c < unknown; ++c) px[c] = -1;
     }
   }));
-  return WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat);
+  return WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat, threads);
 }
 
 namespace {
@@ -544,7 +546,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   const auto write_start = std::chrono::steady_clock::now();
   ReleaseFreeHeap();
   REFLCAP_RETURN_IF_ERROR(
-      WriteFitMaps(dir, atlas, &fits, pass->sigma.get(), albedo_filled, clusters.cluster_of));
+      WriteFitMaps(dir, atlas, &fits, pass->sigma.get(), albedo_filled, clusters.cluster_of,
+                   options.threads > 0 ? options.threads : HardwareThreads()));
   clusters = MaterialClusters();
   albedo_filled = std::vector<uint8_t>();
   REFLCAP_RETURN_IF_ERROR(pass->sigma->Remove());

@@ -109,9 +109,10 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<std::filesystem::path>& 
 // only its scalars remain. `albedo_filled` (one byte per texel, or empty for none) marks the
 // texels albedo_fill.h filled: status.exr's `albedo_filled` channel (1 = filled). `cluster_of`
 // (one per texel, or empty for none) is the `material_cluster` channel (material_clusters.h; -1 =
-// no cluster); the `model` channel is TexelModelOf (-1 = no texel).
+// no cluster); the `model` channel is TexelModelOf (-1 = no texel). Each map is compressed on
+// `threads` threads (WriteExrChannels).
 Status WriteFitMaps(const std::filesystem::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled = {},
-                    const std::vector<int32_t>& cluster_of = {});
+                    const std::vector<int32_t>& cluster_of = {}, int threads = 0);
 
 }  // namespace reflcap::fit

@@ -8,6 +8,8 @@
 #include "engine/brdf/lafortune.h"
 #include "engine/core/check.h"
 #include "engine/core/parallel.h"
+#include "engine/fit/batched_kernel.h"
+#include "engine/fit/material_clusters.h"
 #include "engine/fit/problem.h"
 
 namespace reflcap::fit {
@@ -119,6 +121,91 @@ double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSamp
     const double diffuse = s0 > 0 ? std::max(0.0, s1 / s0) : 0.0;
     (*rho)[c] = float(diffuse * kPi);
     // Rounding can leave a tiny negative where the fit is exact; a cost is never below 0.
+    cost += std::max(0.0, 0.5 * (s2 - 2 * diffuse * s1 + diffuse * diffuse * s0));
+  }
+  return cost;
+}
+
+void TexelResiduals::Prepare(const BrdfSample* samples, size_t count, double min_cos_theta,
+                             int folds) {
+  // Sized for every sample (padded) up front and filled by index; cut to the usable ones below.
+  Resize((count + kLanes - 1) / kLanes * kLanes);
+  size_t n = 0;
+  for (size_t i = 0; i < count; ++i) {
+    const BrdfSample& s = samples[i];
+    const UsableSample u = PrepareUsableSample(s, min_cos_theta);
+    if (!u.usable) continue;
+    xx_[n] = u.wi[0] * u.wo[0];
+    yy_[n] = u.wi[1] * u.wo[1];
+    zz_[n] = u.wi[2] * u.wo[2];
+    fold_[n] = folds > 0 ? uint8_t(PhotographFold(s.image, folds)) : 0;
+    for (int c = 0; c < brdf::kChannels; ++c) {
+      const float weight = s.weight[c], y = s.value[c];
+      const bool valid = weight > 0 && std::isfinite(weight) && std::isfinite(y);
+      y_[size_t(c)][n] = valid ? y : 0.0f;
+      w_[size_t(c)][n] = valid ? weight : 0.0f;
+    }
+    ++n;
+  }
+  usable_ = n;
+  // Padding: base 0 gives lobe value 0, and weight 0 adds nothing to any sum.
+  const size_t padded = (n + kLanes - 1) / kLanes * kLanes;
+  for (size_t i = n; i < padded; ++i) {
+    xx_[i] = yy_[i] = zz_[i] = 0.0f;
+    fold_[i] = 0;
+    for (int c = 0; c < brdf::kChannels; ++c) y_[size_t(c)][i] = w_[size_t(c)][i] = 0.0f;
+  }
+  Resize(padded);
+}
+
+void TexelResiduals::Resize(size_t size) {
+  xx_.resize(size);
+  yy_.resize(size);
+  zz_.resize(size);
+  fold_.resize(size);
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    y_[size_t(c)].resize(size);
+    w_[size_t(c)].resize(size);
+  }
+  values_.resize(size);
+}
+
+const float* TexelResiduals::Lobes(const brdf::BrdfParams* params, int c) {
+  if (params == nullptr || params->num_lobes == 0) {
+    std::fill(values_.begin(), values_.end(), 0.0f);
+  } else {
+    const auto channel = params->Channel(c);
+    EvaluateLobeSum(xx_.data(), yy_.data(), zz_.data(), padded(), channel.data(),
+                    params->num_lobes, values_.data());
+  }
+  return values_.data();
+}
+
+const float* TexelResiduals::Model(const brdf::BrdfParams& params, int c) {
+  Lobes(&params, c);
+  // As EvalChannel: the diffuse term rho / pi first, in float, then the lobes.
+  const float diffuse = params.rho_d[size_t(c)] * float(kInvPi);
+  for (float& v : values_) v = diffuse + v;
+  return values_.data();
+}
+
+double RefitAlbedoCost(TexelResiduals* r, const brdf::BrdfParams* params,
+                       std::array<float, brdf::kChannels>* rho) {
+  double cost = 0;
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    const float* lobe = r->Lobes(params, c);
+    const float* y = r->y(c);
+    const float* w = r->w(c);
+    double s0 = 0, s1 = 0, s2 = 0;
+    for (size_t i = 0; i < r->padded(); ++i) {
+      const double e = double(y[i]) - double(lobe[i]);
+      s0 += w[i];
+      s1 += w[i] * e;
+      s2 += w[i] * e * e;
+    }
+    // As the per-sample RefitAlbedoCost below.
+    const double diffuse = s0 > 0 ? std::max(0.0, s1 / s0) : 0.0;
+    (*rho)[c] = float(diffuse * kPi);
     cost += std::max(0.0, 0.5 * (s2 - 2 * diffuse * s1 + diffuse * diffuse * s0));
   }
   return cost;
@@ -236,26 +323,19 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
   std::atomic<size_t> rejected{0}, transferred{0};
   // 16 recipients per task: each tests up to kMaxTransferCandidates lobes on all its samples.
   ParallelFor(row_begin, row_end, 16, [&](int64_t begin, int64_t stop, int) {
-    std::vector<UsableSample> usable;
+    TexelResiduals residuals;
     for (int64_t row = begin; row < stop; ++row) {
       const size_t t = rec[size_t(row)];
       const uint32_t i = uint32_t(t - first);
-      const size_t count = chunk.SampleCount(i);
-      const BrdfSample* samples = chunk.SamplesOf(i);
-      usable.resize(count);
-      for (size_t k = 0; k < count; ++k) usable[k] = PrepareUsableSample(samples[k], min_cos_theta);
+      residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), min_cos_theta);
       std::array<float, brdf::kChannels> rho{};
-      const double lambert_cost = RefitAlbedoCost(samples, count, usable.data(), nullptr, &rho);
+      const double lambert_cost = RefitAlbedoCost(&residuals, nullptr, &rho);
       // The evidence bound of the texel's own fit (problem.h kMaxLobeSupremum): a lobe may rise
       // at most 10x above the brightest value the texel showed, per channel.
       std::array<double, brdf::kChannels> brightest{};
-      for (size_t k = 0; k < count; ++k) {
-        if (!usable[k].usable) continue;
-        for (int c = 0; c < brdf::kChannels; ++c) {
-          const float w = samples[k].weight[c], y = samples[k].value[c];
-          if (w > 0 && std::isfinite(w) && std::isfinite(y)) {
-            brightest[c] = std::max(brightest[c], double(y));
-          }
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        for (size_t k = 0; k < residuals.padded(); ++k) {
+          if (residuals.w(c)[k] > 0) brightest[c] = std::max(brightest[c], double(residuals.y(c)[k]));
         }
       }
       double best_cost = lambert_cost + options.max_cost_increase;
@@ -272,7 +352,7 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
               within_evidence && LobeSupremum(lobes, c) <= kMaxLobeSupremum * brightest[c];
         }
         if (!within_evidence) continue;
-        const double cost = RefitAlbedoCost(samples, count, usable.data(), &lobes, &rho);
+        const double cost = RefitAlbedoCost(&residuals, &lobes, &rho);
         if (std::isfinite(cost) && cost <= best_cost) {
           best_cost = cost;
           best = donor;

@@ -104,6 +104,43 @@ bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const fl
 double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
                        const brdf::BrdfParams* params, std::array<float, brdf::kChannels>* rho);
 
+// A texel's residuals laid out once for testing many lobes on them (lobe transfer, clusters):
+// per usable sample (PrepareUsableSample) the direction products wi_j wo_j as EvalChannel forms
+// them, its photograph's fold, and per channel the value and weight — weight 0 and value 0 where
+// ChannelResidual has no residual — padded with zero-weight entries to a multiple of kLanes.
+// The lobes go through EvaluateLobeSum (batched_kernel.h), kLanes samples per vector step.
+class TexelResiduals {
+ public:
+  // `folds` > 0 records each sample's PhotographFold(image, folds).
+  void Prepare(const BrdfSample* samples, size_t count, double min_cos_theta, int folds = 0);
+
+  size_t usable() const { return usable_; }  // usable samples
+  // Channel c's summed lobes of `params` at every entry (0 where params is null: Lambert);
+  // valid until the next call.
+  const float* Lobes(const brdf::BrdfParams* params, int c);
+  // The whole model of `params` (albedo and lobes) in channel c, like Lobes.
+  const float* Model(const brdf::BrdfParams& params, int c);
+
+  size_t padded() const { return xx_.size(); }
+  const float* y(int c) const { return y_[size_t(c)].data(); }
+  const float* w(int c) const { return w_[size_t(c)].data(); }
+  const uint8_t* fold() const { return fold_.data(); }
+  const float* zz() const { return zz_.data(); }  // cos theta_i cos theta_o
+
+ private:
+  void Resize(size_t size);  // every per-entry array
+
+  size_t usable_ = 0;
+  std::vector<float> xx_, yy_, zz_;
+  std::array<std::vector<float>, brdf::kChannels> y_, w_;
+  std::vector<uint8_t> fold_;
+  std::vector<float> values_;
+};
+
+// RefitAlbedoCost on prepared residuals (the same sums; the lobes by EvaluateLobeSum).
+double RefitAlbedoCost(TexelResiduals* r, const brdf::BrdfParams* params,
+                       std::array<float, brdf::kChannels>* rho);
+
 // The largest value the lobes of `p` reach in channel c over the hemisphere.
 double LobeSupremum(const brdf::BrdfParams& p, int c);
 

@@ -556,12 +556,12 @@ int FoldOf(const BrdfSample& s, int folds) { return PhotographFold(s.image, fold
 
 // True when every fold holds a usable sample (and so every training set lacks one): with fewer
 // photographs than folds the comparison has nothing to hold out, and the criterion decides.
-bool EveryFoldHeld(const BrdfSample* samples, size_t count, const UsableSample* usable, int folds) {
+// `r` prepared with the folds.
+bool EveryFoldHeld(const TexelResiduals& r, int folds) {
   std::array<bool, kMaxModelFolds> held{};
   int distinct = 0;
-  for (size_t i = 0; i < count && distinct < folds; ++i) {
-    if (!usable[i].usable) continue;
-    bool& h = held[size_t(FoldOf(samples[i], folds))];
+  for (size_t i = 0; i < r.usable() && distinct < folds; ++i) {
+    bool& h = held[size_t(r.fold()[i])];
     distinct += !h;
     h = true;
   }
@@ -574,20 +574,20 @@ constexpr double kKFoldMargin = 0.5;
 
 // The held-out cost of `params`' lobes (none when null) with the albedo re-fitted per fold on
 // the other folds: sum over folds of 1/2 sum w (y - rho_f / pi - lobe)^2 over the fold's samples.
-double CrossValidatedLobeCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
-                              const brdf::BrdfParams* params, int folds) {
+double CrossValidatedLobeCost(TexelResiduals* r, const brdf::BrdfParams* params, int folds) {
   double cost = 0;
   for (int c = 0; c < brdf::kChannels; ++c) {
-    const auto channel = LobeChannel(params, c);
-    const int lobes = params ? params->num_lobes : 0;
+    const float* lobe = r->Lobes(params, c);
+    const float* y = r->y(c);
+    const float* w = r->w(c);
+    const uint8_t* fold = r->fold();
     std::array<double, kMaxModelFolds> s0{}, s1{}, s2{};
-    for (size_t i = 0; i < count; ++i) {
-      double w, e;
-      if (!ChannelResidual(samples[i], usable[i], c, channel.data(), lobes, &w, &e)) continue;
-      const int f = FoldOf(samples[i], folds);
-      s0[size_t(f)] += w;
-      s1[size_t(f)] += w * e;
-      s2[size_t(f)] += w * e * e;
+    for (size_t i = 0; i < r->padded(); ++i) {
+      const double e = double(y[i]) - double(lobe[i]);
+      const size_t f = fold[i];
+      s0[f] += w[i];
+      s1[f] += w[i] * e;
+      s2[f] += w[i] * e * e;
     }
     double t0 = 0, t1 = 0;
     for (int f = 0; f < folds; ++f) {
@@ -607,17 +607,16 @@ double CrossValidatedLobeCost(const BrdfSample* samples, size_t count, const Usa
 
 // Fold f's held-out cost under `fit` (a fit made without fold f): 1/2 sum w (y - f)^2 over the
 // fold's samples and every channel.
-double FoldHeldOutCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
-                       const brdf::BrdfParams& fit, int folds, int f) {
+double FoldHeldOutCost(TexelResiduals* r, const brdf::BrdfParams& fit, int f) {
   double cost = 0;
   for (int c = 0; c < brdf::kChannels; ++c) {
-    const auto channel = fit.Channel(c);  // the whole model: albedo and lobes
-    for (size_t i = 0; i < count; ++i) {
-      if (FoldOf(samples[i], folds) != f) continue;
-      double w, e;
-      if (ChannelResidual(samples[i], usable[i], c, channel.data(), fit.num_lobes, &w, &e)) {
-        cost += 0.5 * w * e * e;
-      }
+    const float* model = r->Model(fit, c);
+    const float* y = r->y(c);
+    const float* w = r->w(c);
+    for (size_t i = 0; i < r->padded(); ++i) {
+      if (r->fold()[i] != f) continue;
+      const double e = double(y[i]) - double(model[i]);
+      cost += 0.5 * w[i] * e * e;
     }
   }
   return cost;
@@ -646,7 +645,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
     // The cluster lobes' scores first (in parallel), and which texels need the refits.
     std::vector<uint8_t> needs_refit(chunk.texel_count, 0);
     ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
-      std::vector<UsableSample> usable;
+      TexelResiduals residuals;
       for (int64_t ii = begin; ii < end; ++ii) {
         const uint32_t i = uint32_t(ii);
         const size_t t = size_t(chunk.first_texel) + i;
@@ -658,17 +657,12 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
             fits->donor(t) == FitStore::kClusterLobe || fits->samples(t) < kMinTransferSamples) {
           continue;
         }
-        const BrdfSample* samples = chunk.SamplesOf(i);
-        const size_t count = chunk.SampleCount(i);
-        usable.resize(count);
-        for (size_t s = 0; s < count; ++s) {
-          usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
-        }
-        if (!EveryFoldHeld(samples, count, usable.data(), folds)) continue;
+        residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
+        if (!EveryFoldHeld(residuals, folds)) continue;
         double best = std::numeric_limits<double>::infinity();
         const auto& kept = clusters.kept[size_t(k)];
         for (size_t j = 0; j < kept.size(); ++j) {
-          const double cv = CrossValidatedLobeCost(samples, count, usable.data(), &kept[j], folds);
+          const double cv = CrossValidatedLobeCost(&residuals, &kept[j], folds);
           if (std::isfinite(cv) && cv < best) {
             best = cv;
             best_lobe[i] = int16_t(j);
@@ -709,16 +703,11 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
         stats->kfold_refits += refit.size();
         ParallelFor(0, int64_t(refit.size()), 64, [&](int64_t begin, int64_t end, int) {
-          std::vector<UsableSample> usable;
+          TexelResiduals residuals;
           for (int64_t j = begin; j < end; ++j) {
             const uint32_t i = refit[size_t(j)];
-            const BrdfSample* samples = chunk.SamplesOf(i);
-            usable.resize(chunk.SampleCount(i));
-            for (size_t s = 0; s < usable.size(); ++s) {
-              usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
-            }
-            own_cv[i] += FoldHeldOutCost(samples, usable.size(), usable.data(),
-                                         fold_fit[size_t(j)].params, folds, f);
+            residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
+            own_cv[i] += FoldHeldOutCost(&residuals, fold_fit[size_t(j)].params, f);
           }
         }, options.threads);
         if (!options.clusters.stop_decided_refits) continue;
@@ -734,7 +723,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   }
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
-    std::vector<UsableSample> usable;
+    TexelResiduals prepared;
     for (int64_t i = begin; i < end; ++i) {
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
@@ -763,23 +752,17 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         no_lobe += recipient;
         continue;
       }
-      const size_t count = chunk.SampleCount(uint32_t(i));
-      const BrdfSample* samples = chunk.SamplesOf(uint32_t(i));
-      usable.resize(count);
+      prepared.Prepare(chunk.SamplesOf(uint32_t(i)), chunk.SampleCount(uint32_t(i)),
+                       options.min_cos_theta, folds);
       size_t residuals = 0;
-      for (size_t s = 0; s < count; ++s) {
-        usable[s] = PrepareUsableSample(samples[s], options.min_cos_theta);
-        if (!usable[s].usable) continue;
-        for (int c = 0; c < brdf::kChannels; ++c) {
-          residuals += samples[s].weight[c] > 0 && std::isfinite(samples[s].weight[c]) &&
-                       std::isfinite(samples[s].value[c]);
-        }
+      for (int c = 0; c < brdf::kChannels; ++c) {
+        for (size_t s = 0; s < prepared.usable(); ++s) residuals += prepared.w(c)[s] > 0;
       }
       TexelFit fit = fits->Get(t);
       std::array<float, brdf::kChannels> rho{};
       const double own_cost =
-          RefitAlbedoCost(samples, count, usable.data(), lambert_only ? nullptr : &fit.params, &rho);
-      if (folds > 0 && !lambert_only && EveryFoldHeld(samples, count, usable.data(), folds)) {
+          RefitAlbedoCost(&prepared, lambert_only ? nullptr : &fit.params, &rho);
+      if (folds > 0 && !lambert_only && EveryFoldHeld(prepared, folds)) {
         // A texel with a lobe: the cluster's lobe replaces it when it predicts the texel's
         // held-out photographs better (k-fold), the texel's own lobe fitted without each fold.
         if (best_lobe[size_t(i)] < 0) continue;  // no kept lobe scored: the lobe stays
@@ -789,10 +772,10 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         const double own_score =
             fits->donor(t) == FitStore::kNoDonor
                 ? own_cv[size_t(i)]
-                : CrossValidatedLobeCost(samples, count, usable.data(), &fit.params, folds);
+                : CrossValidatedLobeCost(&prepared, &fit.params, folds);
         // Ties (both predictions exact to rounding) keep the texel's own measurement.
         if (!(best_cv[size_t(i)] < own_score - kKFoldMargin)) continue;
-        const double cost = RefitAlbedoCost(samples, count, usable.data(), best, &rho);
+        const double cost = RefitAlbedoCost(&prepared, best, &rho);
         fit.params.lobes = best->lobes;
         fit.params.rho_d = rho;
         fit.cost = float(cost);
@@ -811,7 +794,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       const brdf::BrdfParams* best = nullptr;
       std::array<float, brdf::kChannels> best_rho{};
       for (const brdf::BrdfParams& lobe : clusters.kept[size_t(k)]) {
-        const double cost = RefitAlbedoCost(samples, count, usable.data(), &lobe, &rho);
+        const double cost = RefitAlbedoCost(&prepared, &lobe, &rho);
         if (std::isfinite(cost) && cost < best_cost) {
           best_cost = cost;
           best = &lobe;

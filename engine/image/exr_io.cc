@@ -16,6 +16,7 @@
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfPixelType.h>
+#include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/openexr.h>
 
 #include <cmath>
@@ -24,6 +25,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <set>
 #include <system_error>
 #include <utility>
@@ -349,7 +351,7 @@ struct Sanitizer {
 };
 
 Status WriteExrImpl(const fs::path& path, const Image& image, const std::vector<std::string>& names,
-                    ExrPixelType type) {
+                    ExrPixelType type, int threads = kExrThreads) {
   if (image.width <= 0 || image.height <= 0 || image.channels <= 0) {
     return InvalidArgumentError(path.string(), ": cannot write an empty image (", image.width, "x",
                                 image.height, "x", image.channels, ")");
@@ -426,7 +428,7 @@ Status WriteExrImpl(const fs::path& path, const Image& image, const std::vector<
       }
       // The file is closed (line offset table written) when `file` leaves this scope, before
       // WriteFileAtomic renames it.
-      Imf::OutputFile file(tmp_path.c_str(), header, kExrThreads);
+      Imf::OutputFile file(tmp_path.c_str(), header, threads > 1 ? threads : kExrThreads);
       file.setFrameBuffer(frame_buffer);
       file.writePixels(image.height);
     } catch (const std::exception& e) {
@@ -522,8 +524,13 @@ Status WriteExr(const fs::path& path, const Image& image, ExrPixelType type) {
 }
 
 Status WriteExrChannels(const fs::path& path, const Image& image,
-                        const std::vector<std::string>& names, ExrPixelType type) {
-  return WriteExrImpl(path, image, names, type);
+                        const std::vector<std::string>& names, ExrPixelType type, int threads) {
+  if (threads > 1) {
+    static std::mutex pool_mutex;  // the pool is global: grown by one caller at a time
+    const std::lock_guard<std::mutex> lock(pool_mutex);
+    if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
+  }
+  return WriteExrImpl(path, image, names, type, threads);
 }
 
 }  // namespace reflcap

@@ -39,9 +39,11 @@ Status WriteExr(const std::filesystem::path& path, const Image& image,
 
 // Writes image.channels named channels (names.size() == image.channels, names non-empty and
 // unique, else InvalidArgument), atomically, sanitised as WriteExr. OpenEXR stores the channels
-// sorted by name, which is the order ReadExrChannels returns them in.
+// sorted by name, which is the order ReadExrChannels returns them in. `threads` > 1 compresses
+// on that many threads of OpenEXR's global pool (grown to it, never shrunk): for a large file
+// written while nothing else runs (the fit's maps); the file is the same byte for byte.
 Status WriteExrChannels(const std::filesystem::path& path, const Image& image,
                         const std::vector<std::string>& names,
-                        ExrPixelType type = ExrPixelType::kFloat);
+                        ExrPixelType type = ExrPixelType::kFloat, int threads = 0);
 
 }  // namespace reflcap

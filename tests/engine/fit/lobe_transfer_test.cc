@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <vector>
 
 #include "engine/brdf/lafortune.h"
@@ -158,6 +159,110 @@ TEST(LobeTransfer, ABorrowedLobeIsLentOnInTheNextRound) {
   ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &round2);
   EXPECT_EQ(store.donor(2), 1);
   EXPECT_EQ(store.Get(2).params.lobes[0][1].n, truth.lobes[0][1].n);
+}
+
+// Samples in every direction (some below the horizon: not usable), with a NaN value, a zero and
+// an infinite weight, and a zeroed record among them. A fixed LCG: the same on every platform.
+std::vector<BrdfSample> MixedSamples(int count) {
+  uint32_t state = 7;
+  const auto uniform = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return double(state >> 8) / double(1u << 24);
+  };
+  std::vector<BrdfSample> out;
+  for (int i = 0; i < count; ++i) {
+    const double ti = 95 * uniform(), pi = 360 * uniform();
+    const double to = 95 * uniform(), po = 360 * uniform();
+    BrdfSample s{};
+    const Vec3f wi = testing::Direction(ti, pi), wo = testing::Direction(to, po);
+    for (int j = 0; j < 3; ++j) {
+      s.wi[j] = wi[j];
+      s.wo[j] = wo[j];
+      s.value[j] = float(0.05 + uniform());
+      s.weight[j] = float(1 + 100 * uniform());
+    }
+    s.image = uint32_t(i);
+    out.push_back(s);
+  }
+  out[3].value[1] = std::nanf("");
+  out[5].weight[0] = 0;
+  out[8].weight[2] = std::numeric_limits<float>::infinity();
+  out[11] = BrdfSample{};
+  return out;
+}
+
+TEST(TexelResiduals, VectorLobeSumsMatchEvalChannel) {
+  // EvaluateLobeSum's exp(n log b) against EvalChannel's pow, lobe by lobe and summed: broad,
+  // glossy and the sharpest lobes, an off-specular one, one cut off everywhere (Cz < 0 with
+  // Cx = Cy = 0 on the upper hemisphere) and one saturated (3^100 > kMaxLobeValue).
+  // Tolerance: float rounding of the base (~1e-7 relative, amplified n-fold in b^n: lafortune.h)
+  // plus exp/log's few ulps, relative; 1e-6 of the lobe's peak absolute, for bases that cancel.
+  const std::vector<BrdfSample> samples = MixedSamples(300);
+  TexelResiduals r;
+  r.Prepare(samples.data(), samples.size(), 0.0);
+  ASSERT_GT(r.usable(), 100u);
+  ASSERT_EQ(r.padded() % 16, 0u);
+  const std::vector<brdf::LobeParams> lobes = {
+      {0, 0, 0.9f, 0.25f},      {-1, -1, 1, 1},       {-1.02f, -0.98f, 1, 40},
+      {-1, -1, 1, 10000},       {-1.1f, -1.1f, 0.7f, 8}, {0, 0, -1, 3},
+      {-3, -3, 3, 100}};
+  for (size_t k = 0; k < lobes.size(); ++k) {
+    brdf::BrdfParams p;
+    p.num_lobes = k + 1 < lobes.size() ? 2 : 1;  // each with the next one, the last alone
+    p.rho_d = {0.3f, 0.2f, 0.1f};
+    for (int c = 0; c < 3; ++c) {
+      p.lobes[0][size_t(c)] = lobes[k];
+      if (p.num_lobes == 2) p.lobes[1][size_t(c)] = lobes[k + 1];
+    }
+    const float* got = r.Lobes(&p, 1);
+    std::vector<float> values(got, got + r.padded());
+    std::vector<float> model(r.padded());
+    const float* m = r.Model(p, 2);
+    model.assign(m, m + r.padded());
+    double peak = 0, n_max = 0;
+    for (int l = 0; l < p.num_lobes; ++l) {
+      const brdf::LobeParams& q = p.lobes[size_t(l)][1];
+      peak += std::min(std::pow(std::max({std::abs(q.cx), std::abs(q.cy), q.cz}), double(q.n)),
+                       brdf::kMaxLobeValue);
+      n_max = std::max(n_max, double(q.n));
+    }
+    size_t j = 0;
+    for (const BrdfSample& s : samples) {
+      const UsableSample u = PrepareUsableSample(s, 0.0);
+      if (!u.usable) continue;
+      auto channel = p.Channel(1);
+      channel[0] = 0;
+      const double want = brdf::EvalChannel(u.wi, u.wo, channel.data(), p.num_lobes);
+      const double tolerance = 4e-7 * (n_max + 100) * std::abs(want) + 1e-6 * peak;
+      ASSERT_NEAR(values[j], want, tolerance) << "lobe " << k << " sample " << j;
+      const double want_model = brdf::EvalChannel(u.wi, u.wo, p.Channel(2).data(), p.num_lobes);
+      ASSERT_NEAR(model[j], want_model, 4e-7 * (n_max + 100) * std::abs(want_model) + 1e-6 * peak)
+          << "lobe " << k << " sample " << j;
+      ++j;
+    }
+    ASSERT_EQ(j, r.usable());
+    for (; j < r.padded(); ++j) EXPECT_EQ(values[j], 0.0f) << "padding";
+  }
+}
+
+TEST(TexelResiduals, RefitAlbedoCostMatchesThePerSampleSums) {
+  // The prepared residuals (invalid channels as weight 0, padding) give the per-sample
+  // RefitAlbedoCost's albedo and cost, with and without lobes. 1e-5 relative: the lobes'
+  // float evaluation (above); the sums are double in both.
+  const std::vector<BrdfSample> samples = MixedSamples(200);
+  TexelResiduals r;
+  r.Prepare(samples.data(), samples.size(), 0.1);
+  std::vector<UsableSample> usable;
+  for (const BrdfSample& s : samples) usable.push_back(PrepareUsableSample(s, 0.1));
+  const brdf::BrdfParams glossy = Glossy();
+  for (const brdf::BrdfParams* p : {static_cast<const brdf::BrdfParams*>(nullptr), &glossy}) {
+    std::array<float, 3> rho_a{}, rho_b{};
+    const double a = RefitAlbedoCost(&r, p, &rho_a);
+    const double b = RefitAlbedoCost(samples.data(), samples.size(), usable.data(), p, &rho_b);
+    EXPECT_GT(b, 0.0);
+    EXPECT_NEAR(a, b, 1e-5 * b);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rho_a[size_t(c)], rho_b[size_t(c)], 1e-5) << c;
+  }
 }
 
 TEST(FitStore, KeepsEveryFieldOfTheFittedLobesAndStartsAsTooFewSamples) {

@@ -190,6 +190,20 @@ TEST(ExrIo, NamedChannelsRoundTripInAlphabeticalOrder) {
   }
 }
 
+TEST(ExrIo, CompressingOnThreadsWritesTheSameBytes) {
+  // The fit's maps are compressed on the pool's threads: the file must be the one a single
+  // thread writes (ZIP blocks of 16 scanlines each, written in order), at sizes with a partial
+  // last block.
+  ScratchDir dir;
+  const std::vector<std::string> names = {"a", "b", "c", "d", "e"};
+  const Image image = PatternImage(97, 203, 5);
+  ASSERT_TRUE(WriteExrChannels(dir / "one.exr", image, names).ok());
+  ASSERT_TRUE(WriteExrChannels(dir / "four.exr", image, names, ExrPixelType::kFloat, 4).ok());
+  const std::string one = ReadBytes(dir / "one.exr");
+  EXPECT_GT(one.size(), 97u * 203u * 5u);  // little compresses: the blocks are not trivial
+  EXPECT_EQ(one, ReadBytes(dir / "four.exr"));
+}
+
 TEST(ExrIo, RgbaWritesFourNamedChannels) {
   ScratchDir dir;
   const fs::path path = dir / "rgba.exr";
