@@ -22,6 +22,7 @@
 #include "engine/image/png_io.h"
 #include "render/reference/reference_renderer.h"
 #include "render/validate/figures.h"
+#include "render/validate/pixel_texels.h"
 
 namespace reflcap::validate {
 namespace fs = std::filesystem;
@@ -212,6 +213,28 @@ std::string FigureImages(const Capture& capture, const Entry& e) {
            "\" alt=\"regions of " + file + "\"></a>";
   }
   return out + "</div>";
+}
+
+// metrics.json worst_pixels[].texel: null fields where unknown (no texel, no channel, no store).
+Json TexelJson(const PixelTexel& t) {
+  if (t.texel < 0) return {{"index", nullptr}};
+  const auto code = [](int c) { return c >= 0 ? Json(c) : Json(nullptr); };
+  const auto name = [](const std::string& n) { return n.empty() ? Json(nullptr) : Json(n); };
+  Json j = {{"index", t.texel},
+            {"model", code(t.model)},
+            {"model_name", name(t.model_name)},
+            {"status", code(t.status)},
+            {"status_name", name(t.status_name)},
+            {"material_cluster", code(t.cluster)},
+            {"lobe_donor", std::isfinite(t.lobe_donor) ? Json(t.lobe_donor) : Json(nullptr)}};
+  if (t.train_samples >= 0) {
+    j["train_samples"] = t.train_samples;
+    j["brightest_train"] = {t.brightest[0], t.brightest[1], t.brightest[2]};
+  } else {
+    j["train_samples"] = nullptr;
+    j["brightest_train"] = nullptr;
+  }
+  return j;
 }
 
 Json SumsJson(const ErrorSums& s, bool with_ssim) {
@@ -579,8 +602,26 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                      return a.pixel.error_over_peak2 > b.pixel.error_over_peak2;
                    });
   if (worst_pixels.size() > size_t(kWorstPixelsListed)) worst_pixels.resize(kWorstPixelsListed);
+  // With the fit: the texel each worst pixel shows, its model, and its train samples.
+  std::vector<PixelTexel> worst_texels;
+  std::string worst_texels_note;
+  if (!options.fit_dir.empty() && !worst_pixels.empty()) {
+    std::vector<PixelQuery> queries;
+    for (const ListedPixel& w : worst_pixels) {
+      queries.push_back({entries[w.entry].index, w.pixel.x, w.pixel.y});
+    }
+    auto looked_up = LookUpPixelTexels(capture, options.fit_dir, options.samples_dir, queries);
+    if (looked_up.ok()) {
+      worst_texels = std::move(looked_up).value();
+    } else {
+      // The table keeps its other columns; the reason is shown above it.
+      worst_texels_note = looked_up.status().message();
+      REFLCAP_LOG(kWarning) << "validate: worst pixels' texels: " << worst_texels_note;
+    }
+  }
   Json worst_json = Json::array();
-  for (const ListedPixel& w : worst_pixels) {
+  for (size_t listed = 0; listed < worst_pixels.size(); ++listed) {
+    const ListedPixel& w = worst_pixels[listed];
     const Entry& e = entries[w.entry];
     const WorstPixel& px = w.pixel;
     Json region_names = Json::array();
@@ -598,7 +639,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
           OrNull(raw.sse_over_peak2 > 0
                      ? std::optional<double>(px.error_over_peak2 / raw.sse_over_peak2)
                      : std::nullopt)},
-         {"regions", e.score.has_regions ? region_names : Json(nullptr)}});
+         {"regions", e.score.has_regions ? region_names : Json(nullptr)},
+         {"texel", worst_texels.empty() ? Json(nullptr) : TexelJson(worst_texels[listed])}});
   }
   Json overall = {{"images", entries.size()},
                   {"pixels", size_t(raw.pixels)},
@@ -1055,10 +1097,27 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   } else {
     html << "<p>The " << worst_pixels.size() << " evaluated pixels of largest error e = "
             "&Sigma;<sub>RGB</sub> (r &minus; p)&sup2; relative to their image's peak&sup2;, over "
-            "all images; x = column, y = row (0 = top).</p>\n<table><tr><th>image</th><th>x</th>"
+            "all images; x = column, y = row (0 = top).";
+    if (!worst_texels.empty()) {
+      html << " The texel each shows (the render's own lookup at the pixel centre), the model "
+              "and fit status it ended with"
+           << (options.samples_dir.empty() ? "" : ", and its train samples: how many, and the "
+                                                  "brightest (a held-out pixel far above it shows "
+                                                  "what no train photograph of the texel did)")
+           << ".";
+    } else if (!worst_texels_note.empty()) {
+      html << " <span class=note>No texels: " << HtmlEscape(worst_texels_note) << "</span>";
+    }
+    html << "</p>\n<table><tr><th>image</th><th>x</th>"
             "<th>y</th><th>photograph RGB</th><th>render RGB</th><th>e</th>"
-            "<th>share of squared error</th><th>regions</th></tr>\n";
-    for (const ListedPixel& w : worst_pixels) {
+            "<th>share of squared error</th><th>regions</th>";
+    if (!worst_texels.empty()) {
+      html << "<th>texel</th><th>model</th><th>status</th>";
+      if (!options.samples_dir.empty()) html << "<th>train samples</th><th>brightest train RGB</th>";
+    }
+    html << "</tr>\n";
+    for (size_t listed = 0; listed < worst_pixels.size(); ++listed) {
+      const ListedPixel& w = worst_pixels[listed];
       const Entry& e = entries[w.entry];
       const WorstPixel& px = w.pixel;
       html << "<tr><td>" << (e.figure ? "<a href=\"#" + HtmlEscape(e.key) + "\">" : "")
@@ -1069,7 +1128,23 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                         ? std::optional<double>(px.error_over_peak2 / raw.sse_over_peak2)
                         : std::nullopt)
            << "</td><td>" << (e.score.has_regions ? RegionList(px.region_bits) : "&ndash;")
-           << "</td></tr>\n";
+           << "</td>";
+      if (!worst_texels.empty()) {
+        const PixelTexel& t = worst_texels[listed];
+        const auto named = [](int code, const std::string& name) -> std::string {
+          if (code < 0) return "&ndash;";
+          return name.empty() ? std::to_string(code) : HtmlEscape(name);
+        };
+        html << "<td>" << (t.texel < 0 ? std::string("none") : std::to_string(t.texel))
+             << "</td><td>" << named(t.model, t.model_name) << "</td><td>"
+             << named(t.status, t.status_name) << "</td>";
+        if (!options.samples_dir.empty()) {
+          html << "<td>" << (t.train_samples < 0 ? std::string("&ndash;") : std::to_string(t.train_samples))
+               << "</td><td>" << (t.train_samples < 0 ? std::string("&ndash;") : RgbText(t.brightest))
+               << "</td>";
+        }
+      }
+      html << "</tr>\n";
     }
     html << "</table>\n";
   }

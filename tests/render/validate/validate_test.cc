@@ -255,6 +255,12 @@ TEST(Validate, ReportGathersTheFitStatusMapAndTheCoverageMap) {
   // A single-channel map from an older fit: no model or cluster map to show.
   EXPECT_FALSE(fs::exists(dir / "report/model.png"));
   EXPECT_FALSE(fs::exists(dir / "report/clusters.png"));
+  // This fit folder has no params.exr: the worst pixels keep their table without texels, and
+  // the report says why, naming the file.
+  EXPECT_NE(html.find("No texels: " + (dir / "fit/params.exr").string()), std::string::npos);
+  const Json metrics = Json::parse(ReadTextFile(dir / "report/metrics.json").value());
+  ASSERT_FALSE(metrics["overall"]["worst_pixels"].empty());
+  EXPECT_TRUE(metrics["overall"]["worst_pixels"][0]["texel"].is_null());
 }
 
 TEST(Validate, ReportShowsTheModelAndClusterMapsTheFitWrote) {

@@ -3,6 +3,7 @@
 // validate and an import-diligent -> info round trip.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -11,6 +12,7 @@
 #include "engine/core/atomic_file.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
+#include "engine/texel/sample_store.h"
 #include "tests/support/test_support.h"
 
 namespace reflcap {
@@ -36,6 +38,43 @@ const fs::path& TinyCapture() {
     return out;
   }();
   return capture;
+}
+
+// A 9x9 DiLiGenT-like object in `obj`: a flat disc facing the camera under 4 lights, 8-bit
+// images; image i's pixels read `level(i, x, y)`.
+bool InDisc(int x, int y) { return (x - 4) * (x - 4) + (y - 4) * (y - 4) <= 12; }
+
+template <typename Level>
+void WriteDisc(const fs::path& obj, Level level) {
+  fs::create_directories(obj);
+  Image normals(9, 9, 3, 0.0f), mask(9, 9, 3, 0.0f);
+  for (int y = 0; y < 9; ++y) {
+    for (int x = 0; x < 9; ++x) {
+      if (!InDisc(x, y)) continue;
+      normals.at(x, y, 2) = 1;
+      for (int c = 0; c < 3; ++c) mask.at(x, y, c) = 1;
+    }
+  }
+  ASSERT_TRUE(WriteExr(obj / "normals.exr", normals).ok());
+  ASSERT_TRUE(WritePng(obj / "mask.png", mask).ok());
+  std::string names, dirs, ints;
+  for (int i = 1; i <= 4; ++i) {
+    Image photo(9, 9, 3, 0.0f);
+    for (int y = 0; y < 9; ++y) {
+      for (int x = 0; x < 9; ++x) {
+        for (int c = 0; c < 3; ++c) photo.at(x, y, c) = InDisc(x, y) ? level(i, x, y) : 0.0f;
+      }
+    }
+    char name[16];
+    std::snprintf(name, sizeof name, "%03d.png", i);
+    ASSERT_TRUE(WritePng(obj / name, photo).ok());
+    names += std::string(name) + "\n";
+    dirs += "0 0.6 0.8\n";
+    ints += "1 1 1\n";
+  }
+  testing::WriteText(obj / "filenames.txt", names);
+  testing::WriteText(obj / "light_directions.txt", dirs);
+  testing::WriteText(obj / "light_intensities.txt", ints);
 }
 
 TEST(VerbsCli, HelpAndUsageErrors) {
@@ -137,6 +176,109 @@ TEST(VerbsCli, RenderThenValidatePrintsTheNoiseBound) {
   }
 }
 
+TEST(VerbsCli, ValidateNamesTheTexelBehindEachWorstPixel) {
+  // resample -> fit -> render (one ray per pixel, direct light only) -> validate with the fit and
+  // the store: every worst pixel names its texel, the model it ended with and its train samples.
+  // The texel is checked physically: brightening that one texel's albedo in the fit changes the
+  // pixel in a re-render, and no more than a few other pixels of the image.
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string();
+  const fs::path samples = dir / "samples", fit = dir / "fit", renders = dir / "renders";
+  ASSERT_EQ(RunCli("resample --quiet " + cap + " --out " + samples.string(), dir).exit_code, 0);
+  ASSERT_EQ(RunCli("fit --quiet " + samples.string() + " --out " + fit.string(), dir).exit_code, 0);
+  const std::string render_args = " --supersample 1 --indirect off --quiet";
+  ASSERT_EQ(RunCli("render " + cap + " " + fit.string() + " --out " + renders.string() + render_args,
+                   dir).exit_code, 0);
+  CliResult r = RunCli("validate --quiet " + cap + " " + renders.string() + " --out " +
+                           (dir / "report").string() + " --fit " + fit.string() + " --samples " +
+                           samples.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto metrics = nlohmann::json::parse(ReadTextFile(dir / "report/metrics.json").value());
+  const nlohmann::json& worst = metrics["overall"]["worst_pixels"];
+  ASSERT_FALSE(worst.empty());
+  auto store = SampleStoreReader::Open(samples);
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  const SampleStoreInfo& info = (*store)->info();
+  int checked = 0;
+  std::string file;
+  int x = -1, y = -1;
+  int64_t texel = -1;
+  for (const auto& w : worst) {
+    const nlohmann::json& t = w["texel"];
+    ASSERT_TRUE(t.is_object()) << w.dump();
+    if (t["index"].is_null()) continue;  // a pixel whose centre ray misses (a silhouette)
+    const int64_t index = t["index"].get<int64_t>();
+    ASSERT_GE(index, 0);
+    ASSERT_LT(index, int64_t(info.texels));
+    EXPECT_TRUE(t["model_name"].is_string()) << t.dump();
+    EXPECT_TRUE(t["status_name"].is_string()) << t.dump();
+    // The train samples, as the store holds them.
+    const uint32_t chunk_index = uint32_t(uint64_t(index) / info.chunk_texels);
+    const TexelSampleChunk chunk = (*store)->ReadChunk(chunk_index).value();
+    const uint32_t i = uint32_t(uint64_t(index) - chunk.first_texel);
+    EXPECT_EQ(t["train_samples"].get<int64_t>(), int64_t(chunk.SampleCount(i)));
+    float brightest = 0;
+    for (uint64_t k = 0; k < chunk.SampleCount(i); ++k) {
+      brightest = std::max(brightest, chunk.SamplesOf(i)[k].value[1]);
+    }
+    EXPECT_EQ(t["brightest_train"][1].get<float>(), brightest);
+    ++checked;
+    if (texel < 0 && w["render"][1].get<double>() > 0) {  // lit: the texel's albedo shows
+      file = w["file"].get<std::string>();
+      x = w["x"].get<int>(), y = w["y"].get<int>();
+      texel = index;
+    }
+  }
+  ASSERT_GT(checked, 0);
+  ASSERT_GE(texel, 0) << "no lit worst pixel";
+  // The fit with that texel's albedo raised by 0.5 in every channel, rendered again.
+  std::vector<std::string> names;
+  Image params = ReadExrChannels(fit / "params.exr", &names).value();
+  const uint32_t atlas_pixel = info.pixel_of_texel[size_t(texel)];
+  for (size_t c = 0; c < names.size(); ++c) {
+    if (names[c].rfind("rho_d.", 0) == 0) params.data[atlas_pixel * params.channels + c] += 0.5f;
+  }
+  fs::create_directories(dir / "brighter");
+  ASSERT_TRUE(WriteExrChannels(dir / "brighter/params.exr", params, names).ok());
+  ASSERT_EQ(RunCli("render " + cap + " " + (dir / "brighter").string() + " --out " +
+                       (dir / "renders2").string() + render_args, dir).exit_code, 0);
+  const fs::path exr = fs::path(file).replace_extension(".exr");
+  const Image before = ReadExrRgb(renders / exr).value(), after = ReadExrRgb(dir / "renders2" / exr).value();
+  // The renders are deterministic: every pixel not showing the texel is bit-identical, and the
+  // pixel that does gains 0.5 / pi of its irradiance (well above float noise at 1e-3).
+  EXPECT_GT(after.at(x, y, 1) - before.at(x, y, 1), 1e-3f) << file << " " << x << "," << y;
+  int changed = 0;
+  for (size_t k = 0; k < before.data.size(); k += 3) changed += after.data[k + 1] != before.data[k + 1];
+  // One texel covers about a pixel of these 48-px views (3,000 texels, the object a third of
+  // the frame); a 3x3 neighbourhood bounds it.
+  EXPECT_LE(changed, 9);
+}
+
+TEST(VerbsCli, ValidateNamesTheNormalMapTexelOfEachWorstPixel) {
+  // A normal-map capture's texel is its camera pixel: the worst pixels' texels must be the
+  // masked pixels' row-major indices (BuildNormalMapAtlas's order, counted here independently).
+  // The held-out photographs (every 2nd) read brighter than the train ones, so pixels err.
+  testing::ScratchDir dir;
+  const fs::path obj = dir / "disc";
+  WriteDisc(obj, [](int i, int x, int y) { return (i % 2 ? 0.4f : 0.6f) + 0.02f * float(x + y); });
+  const std::string cap = (dir / "capture").string();
+  ASSERT_EQ(RunCli("import-diligent --quiet " + obj.string() + " --out " + cap + " --holdout-every 2",
+                   dir).exit_code, 0);
+  CliResult r = RunCli("run --quiet " + cap + " --out " + (dir / "run").string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto metrics = nlohmann::json::parse(ReadTextFile(dir / "run/report/metrics.json").value());
+  const nlohmann::json& worst = metrics["overall"]["worst_pixels"];
+  ASSERT_FALSE(worst.empty());
+  for (const auto& w : worst) {
+    const int x = w["x"].get<int>(), y = w["y"].get<int>();
+    ASSERT_TRUE(InDisc(x, y)) << x << "," << y;
+    int64_t index = 0;
+    for (int k = 0; k < y * 9 + x; ++k) index += InDisc(k % 9, k / 9);
+    EXPECT_EQ(w["texel"]["index"].get<int64_t>(), index) << x << "," << y;
+    EXPECT_EQ(w["texel"]["train_samples"].get<int64_t>(), 2) << "one per train photograph";
+  }
+}
+
 TEST(VerbsCli, RenderShardsMergeIntoTheSameFiles) {
   testing::ScratchDir dir;
   const std::string cap = TinyCapture().string(), fit = cap + "/gt";
@@ -186,31 +328,8 @@ TEST(VerbsCli, RenderShardsMergeIntoTheSameFiles) {
 
 TEST(VerbsCli, ImportDiligentThenInfo) {
   testing::ScratchDir dir;
-  // A 9x9 DiLiGenT-like object: a flat disc facing the camera under 4 lights, 8-bit images.
   const fs::path obj = dir / "disc";
-  fs::create_directories(obj);
-  Image normals(9, 9, 3, 0.0f), mask(9, 9, 3, 0.0f), photo(9, 9, 3, 0.0f);
-  for (int y = 0; y < 9; ++y) {
-    for (int x = 0; x < 9; ++x) {
-      if ((x - 4) * (x - 4) + (y - 4) * (y - 4) > 12) continue;
-      normals.at(x, y, 2) = 1;
-      for (int c = 0; c < 3; ++c) mask.at(x, y, c) = photo.at(x, y, c) = 1;
-    }
-  }
-  ASSERT_TRUE(WriteExr(obj / "normals.exr", normals).ok());
-  ASSERT_TRUE(WritePng(obj / "mask.png", mask).ok());
-  std::string names, dirs, ints;
-  for (int i = 1; i <= 4; ++i) {
-    char name[16];
-    std::snprintf(name, sizeof name, "%03d.png", i);
-    ASSERT_TRUE(WritePng(obj / name, photo).ok());
-    names += std::string(name) + "\n";
-    dirs += "0 0.6 0.8\n";
-    ints += "1 1 1\n";
-  }
-  testing::WriteText(obj / "filenames.txt", names);
-  testing::WriteText(obj / "light_directions.txt", dirs);
-  testing::WriteText(obj / "light_intensities.txt", ints);
+  WriteDisc(obj, [](int, int, int) { return 1.0f; });
   const std::string out = (dir / "capture").string();
   CliResult r = RunCli("import-diligent --quiet " + obj.string() + " --out " + out + " --holdout-every 2", dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
