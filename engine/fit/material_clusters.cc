@@ -572,6 +572,15 @@ bool EveryFoldHeld(const TexelResiduals& r, int folds) {
 // is no evidence either way; costs are 1/2 sum w r^2 with w the inverse variance.
 constexpr double kKFoldMargin = 0.5;
 
+// Another cluster's lobe for a Lambert-only recipient (ApplyClusterLobes): offered only when its
+// own cluster's best lobe leaves a reduced chi-square above kForeignLobeTrigger (cost above
+// kForeignLobeTrigger / 2 per residual: the texel's samples contradict that lobe's shape, as a
+// texture patch whose albedo matches another material's does), and taken only when it at least
+// halves that cost (kForeignLobeGain). A margin relative to the cost holds on real photographs,
+// whose model error puts every reduced chi-square well above 1.
+constexpr double kForeignLobeTrigger = 2.0;
+constexpr double kForeignLobeGain = 0.5;
+
 // The held-out cost of `params`' lobes (none when null) with the albedo re-fitted per fold on
 // the other folds: sum over folds of 1/2 sum w (y - rho_f / pi - lobe)^2 over the fold's samples.
 double CrossValidatedLobeCost(TexelResiduals* r, const brdf::BrdfParams* params, int folds) {
@@ -630,7 +639,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   const int own_params = NumParams(options.lobe_model, fits->lobes()) *
                          ProblemsPerTexel(options.lobe_model);
   std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
-  std::atomic<size_t> sparse_lent{0};
+  std::atomic<size_t> sparse_lent{0}, foreign_lent{0};
   const int folds =
       options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0;
   // k-fold: the texels with a lobe of their own that a cluster offers lobes to are fitted again
@@ -721,6 +730,11 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
           std::chrono::duration<double>(std::chrono::steady_clock::now() - refit_start).count();
     }
   }
+  // Every cluster's kept lobes, with their cluster: the foreign offers below.
+  std::vector<std::pair<int32_t, const brdf::BrdfParams*>> all_kept;
+  for (size_t j = 0; j < clusters.kept.size(); ++j) {
+    for (const brdf::BrdfParams& lobe : clusters.kept[j]) all_kept.push_back({int32_t(j), &lobe});
+  }
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
     TexelResiduals prepared;
@@ -801,6 +815,42 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
           best_rho = rho;
         }
       }
+      if (recipient && best != nullptr && all_kept.size() > clusters.kept[size_t(k)].size() &&
+          best_cost > kForeignLobeTrigger * 0.5 * double(residuals)) {
+        // Its own cluster's lobe misfits the texel's samples: another cluster's lobe may fit
+        // them (its material's albedo overlapping this cluster's). Held to the texel's own
+        // evidence bound, as a neighbour's lobe is (lobe_transfer.h).
+        std::array<double, brdf::kChannels> brightest{};
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          for (size_t s = 0; s < prepared.usable(); ++s) {
+            if (prepared.w(c)[s] > 0) brightest[size_t(c)] = std::max(brightest[size_t(c)], double(prepared.y(c)[s]));
+          }
+        }
+        double foreign_cost = std::numeric_limits<double>::infinity();
+        const brdf::BrdfParams* foreign = nullptr;
+        std::array<float, brdf::kChannels> foreign_rho{};
+        for (const auto& [j, lobe] : all_kept) {
+          if (j == k) continue;
+          bool within_evidence = true;
+          for (int c = 0; c < brdf::kChannels; ++c) {
+            within_evidence = within_evidence &&
+                              LobeSupremum(*lobe, c) <= kMaxLobeSupremum * brightest[size_t(c)];
+          }
+          if (!within_evidence) continue;
+          const double cost = RefitAlbedoCost(&prepared, lobe, &rho);
+          if (std::isfinite(cost) && cost < foreign_cost) {
+            foreign_cost = cost;
+            foreign = lobe;
+            foreign_rho = rho;
+          }
+        }
+        if (foreign != nullptr && foreign_cost <= kForeignLobeGain * best_cost) {
+          best = foreign;
+          best_cost = foreign_cost;
+          best_rho = foreign_rho;
+          ++foreign_lent;
+        }
+      }
       const bool take = best != nullptr && (lambert_only ? best_cost <= bar : best_cost < bar);
       if (!take) {
         rejected += recipient;
@@ -825,6 +875,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   stats->transferred += transferred;
   stats->replaced += replaced;
   stats->sparse_lent += sparse_lent;
+  stats->foreign_lent += foreign_lent;
 }
 
 }  // namespace reflcap::fit

@@ -62,6 +62,10 @@
 //      material.
 //      A texel without samples (albedo filled, step 1b) takes the cluster's best lobe untested:
 //      nothing it saw can contradict it, and its material's highlight is the best prediction.
+//      A Lambert-only texel whose own cluster's best lobe still misfits its samples (reduced
+//      chi-square above 2: a texture patch of one material whose colour matches another's) is
+//      offered every other cluster's kept lobes, under its own evidence bound, and takes the best
+//      if it at least halves the cost (MaterialClusterStats::foreign_lent).
 //      A texel that takes a cluster lobe gets donor FitStore::kClusterLobe, its sigmas unknown
 //      (-1), and keeps its status (the lobe is the material's, not measured by the texel alone).
 //
@@ -111,6 +115,7 @@ struct MaterialClusterStats {
   size_t replaced = 0;          // texels with a lobe that took the cluster's instead (criterion)
   size_t sparse_assigned = 0;   // texels with 1-2 samples or a filled albedo given a cluster
   size_t sparse_lent = 0;       // of those, texels that took its lobe
+  size_t foreign_lent = 0;      // recipients that took another cluster's lobe (misfit own)
   size_t kfold_refit = 0;       // texels with an own lobe refitted without some fold
   size_t kfold_refits = 0;      // the refits (a texel and a fold each; at most folds per texel)
   double refit_seconds = 0;     // ApplyClusterLobes' k-fold refits of texels with own lobes

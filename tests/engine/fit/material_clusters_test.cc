@@ -126,6 +126,64 @@ TEST(MaterialClusters, AGlossyMaterialLendsItsLobeAndAMatteOneNothing) {
   for (size_t t = 0; t < 40; ++t) EXPECT_EQ(store.donor(t), FitStore::kNoDonor) << t;
 }
 
+// Samples 25-45 degrees from the mirror direction (and a few far from it), every elevation and
+// azimuth: a texel that missed its highlight but saw the lobe's flank, where a broad lobe still
+// shows and a sharp one has fallen to nothing.
+std::vector<BrdfSample> FlankSamples(const brdf::BrdfParams& truth, int texel) {
+  std::vector<BrdfSample> out;
+  for (int i = 0; i < 36; ++i) {
+    const double theta = 20 + 5 * ((i + texel) % 10), phi = 37.0 * i + 11.0 * texel;
+    const double off = i < 30 ? 40 + 2 * ((i * 7 + texel) % 15) : 120;  // azimuth from mirror
+    out.push_back(testing::ExactSample(truth, Direction(theta, phi), Direction(theta, phi + 180 + off)));
+  }
+  return out;
+}
+
+TEST(MaterialClusters, ARecipientWhoseSamplesContradictItsClustersLobeTakesTheLobeTheyShow) {
+  // Two materials with lobes: A (the glossy albedo, n = 40) and B (another albedo, a broad n = 8
+  // lobe). Texels 80..99 are A's that missed the highlight; 100..119 have A's albedo — so they
+  // cluster with A — but B's lobe (a texture patch of B whose colour matches A's): their flank
+  // samples show a lobe that A's (fallen to nothing there) cannot, and B's fits them exactly.
+  const brdf::BrdfParams glossy = Glossy();
+  brdf::BrdfParams broad;
+  broad.num_lobes = 1;
+  broad.rho_d = kMatteAlbedo;
+  for (int c = 0; c < 3; ++c) broad.lobes[0][size_t(c)] = brdf::MirrorLobe(0.3, 8);
+  brdf::BrdfParams patch = broad;
+  patch.rho_d = kGlossyAlbedo;
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 120; ++t) {
+    if (t < 40) {
+      fits.push_back(DonorFit(glossy));
+      samples.push_back(HighlightSamples(glossy, t));
+    } else if (t < 80) {
+      fits.push_back(DonorFit(broad));
+      samples.push_back(HighlightSamples(broad, t));
+    } else {
+      fits.push_back(RecipientFit(kGlossyAlbedo));
+      samples.push_back(FlankSamples(t < 100 ? glossy : patch, t));
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  MaterialClusters clusters;
+  const MaterialClusterStats stats = RunClusters(chunk, &store, 1, &clusters);
+  ASSERT_EQ(stats.clusters, 2);
+  ASSERT_EQ(stats.clusters_with_lobe, 2);
+  EXPECT_EQ(clusters.cluster_of[80], clusters.cluster_of[0]);
+  EXPECT_EQ(clusters.cluster_of[100], clusters.cluster_of[0]);  // the albedo says A
+  EXPECT_EQ(stats.foreign_lent, 20u);
+  for (size_t t = 80; t < 120; ++t) {
+    ASSERT_EQ(store.donor(t), FitStore::kClusterLobe) << t;
+    const TexelFit f = store.Get(t);
+    const brdf::BrdfParams& want = t < 100 ? glossy : broad;
+    // The cluster's pooled lobe: the truth's to the refinement's tolerance (1 %).
+    EXPECT_NEAR(f.params.lobes[0][0].n, want.lobes[0][0].n, 1e-2 * want.lobes[0][0].n) << t;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(f.params.rho_d[size_t(c)], kGlossyAlbedo[size_t(c)], 1e-2) << t;
+  }
+}
+
 TEST(MaterialClusters, ThePooledFitRecoversTheLobeNoDonorGotRight) {
   // Every donor's own fit is off in n by up to +-25 % (too few samples near the peak, say); the
   // samples are the truth's. The refinement on the pooled samples finds n = 40 again, and the
