@@ -44,7 +44,6 @@ struct LaneBatch {
 // Fills a, g and cost of every lane from x (the layout's NumParams entries per lane).
 void EvaluateLanes(const ProblemLayout& layout, LossKind loss, LaneBatch* batch);
 
-// The instruction set the dispatcher picked: "x86-64-v4", "x86-64-v3" or "x86-64".
 // out[i] = the summed lobes of one channel (EvalChannel layout, the albedo slot ignored) at the
 // direction products (xx, yy, zz)[i] (wi_j wo_j), for i < padded, a multiple of kLanes: with
 // the vector exp and log of LaneKernelIsa() (exp(n log b), a few float ulps from
@@ -53,6 +52,7 @@ void EvaluateLanes(const ProblemLayout& layout, LossKind loss, LaneBatch* batch)
 void EvaluateLobeSum(const float* xx, const float* yy, const float* zz, size_t padded,
                      const float* channel, int lobes, float* out);
 
+// The instruction set the dispatcher picked: "x86-64-v4", "x86-64-v3" or "x86-64".
 const char* LaneKernelIsa();
 
 }  // namespace reflcap::fit

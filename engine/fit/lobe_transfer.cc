@@ -183,7 +183,7 @@ const float* TexelResiduals::Lobes(const brdf::BrdfParams* params, int c) {
 
 const float* TexelResiduals::Model(const brdf::BrdfParams& params, int c) {
   Lobes(&params, c);
-  // As EvalChannel: the diffuse term rho / pi first, in float, then the lobes.
+  // The diffuse term rho / pi in float plus the summed lobes (for one lobe EvalChannel's order).
   const float diffuse = params.rho_d[size_t(c)] * float(kInvPi);
   for (float& v : values_) v = diffuse + v;
   return values_.data();
@@ -203,7 +203,7 @@ double RefitAlbedoCost(TexelResiduals* r, const brdf::BrdfParams* params,
       s1 += w[i] * e;
       s2 += w[i] * e * e;
     }
-    // As the per-sample RefitAlbedoCost below.
+    // As the per-sample RefitAlbedoCost above.
     const double diffuse = s0 > 0 ? std::max(0.0, s1 / s0) : 0.0;
     (*rho)[c] = float(diffuse * kPi);
     cost += std::max(0.0, 0.5 * (s2 - 2 * diffuse * s1 + diffuse * diffuse * s0));
