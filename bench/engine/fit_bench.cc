@@ -7,6 +7,7 @@
 //   BM_FitTexels<Backend>/texels  10^3 .. 10^6 texels at 64 samples; 10^6 is fitted as 16 chunks
 //                                 of 62,500 texels, as `reflcap fit` streams a sample store
 //                                 (memory stays at one chunk); Ceres stops at 10^4
+//   BM_LobeTests{PerSample,VectorLanes}  the post-fit passes' candidate-lobe scoring, both ways
 //
 // Every benchmark first fits its data once and checks the result against ground truth
 // (converged fraction and median relative errors, reported as counters); timing only counts
@@ -26,6 +27,8 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstdlib>
 #include <ctime>
 #include <map>
@@ -34,6 +37,7 @@
 
 #include "engine/core/parallel.h"
 #include "engine/fit/fitter.h"
+#include "engine/fit/lobe_transfer.h"
 #include "engine/fit/synthetic_samples.h"
 #include "engine/fit/vulkan_fitter.h"
 #ifdef REFLCAP_HAVE_DEVICE_PEAK
@@ -251,6 +255,71 @@ BENCHMARK(BM_FitVulkanKernel)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1);
+
+// The post-fit lobe tests (lobe transfer, material clusters, diffuse fall-off): the albedo
+// re-fit cost of a candidate lobe on a texel's samples, as they score every candidate at every
+// sample. Per texel of the sweep's data (64 samples) three candidate lobes — the texel's own
+// truth and two other texels' — are scored, per sample (ChannelResidual, scalar pow) or on the
+// texel's prepared residuals (TexelResiduals: the directions once, the lobes on vector lanes).
+// Counter lobe_tests_per_second; check: both give the same costs (to 0.05 noise units).
+void LobeTests(benchmark::State& state, bool vector_lanes) {
+  const Data& d = GetData(kTexels, 64);
+  const TexelSampleChunk& chunk = d.chunk;
+  std::vector<UsableSample> usable;
+  TexelResiduals residuals;
+  const auto costs = [&](uint32_t i, double* out) {
+    const BrdfSample* samples = chunk.SamplesOf(i);
+    const size_t count = chunk.SampleCount(i);
+    std::array<float, brdf::kChannels> rho{};
+    if (vector_lanes) {
+      residuals.Prepare(samples, count, 0.05);
+    } else {
+      usable.resize(count);
+      for (size_t s = 0; s < count; ++s) usable[s] = PrepareUsableSample(samples[s], 0.05);
+    }
+    for (int k = 0; k < 3; ++k) {
+      const brdf::BrdfParams& lobe = d.truth[(i + 997 * size_t(k)) % d.truth.size()];
+      out[k] = vector_lanes ? RefitAlbedoCost(&residuals, &lobe, &rho)
+                            : RefitAlbedoCost(samples, count, usable.data(), &lobe, &rho);
+    }
+  };
+  // The two paths agree (the float lobe evaluation's rounding apart) before anything is timed.
+  {
+    double a[3], b[3];
+    const bool saved = vector_lanes;
+    for (uint32_t i = 0; i < 64; ++i) {
+      vector_lanes = true;
+      costs(i, a);
+      vector_lanes = false;
+      costs(i, b);
+      for (int k = 0; k < 3; ++k) {
+        // Costs are in noise units (1/2 sum w r^2); the passes decide by margins of >= 0.5, so a
+        // tenth of that is agreement (a sharp lobe's n-fold float rounding moves its own
+        // texel's cost by ~0.01).
+        if (!(std::abs(a[k] - b[k]) <= 0.05 + 1e-4 * std::abs(b[k]))) {
+          state.SkipWithError("the vector and per-sample costs disagree");
+          return;
+        }
+      }
+    }
+    vector_lanes = saved;
+  }
+  double sink = 0;
+  for (auto _ : state) {
+    for (uint32_t i = 0; i < chunk.texel_count; ++i) {
+      double c[3];
+      costs(i, c);
+      sink += c[0] + c[1] + c[2];
+    }
+  }
+  benchmark::DoNotOptimize(sink);
+  state.counters["lobe_tests_per_second"] = benchmark::Counter(
+      3.0 * chunk.texel_count * double(state.iterations()), benchmark::Counter::kIsRate);
+}
+void BM_LobeTestsPerSample(benchmark::State& state) { LobeTests(state, false); }
+void BM_LobeTestsVectorLanes(benchmark::State& state) { LobeTests(state, true); }
+BENCHMARK(BM_LobeTestsPerSample)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_LobeTestsVectorLanes)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 #define REFLCAP_SAMPLES_SWEEP(bench) \
   BENCHMARK(bench)->Arg(64)->Arg(16)->Arg(32)->Arg(128)->Arg(256)->Arg(512)->Arg(1024) \
