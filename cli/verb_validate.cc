@@ -47,8 +47,12 @@ int RunValidate(int argc, char** argv) {
   args.AddPositional("RENDERS", &renders, "output folder of reflcap render");
   args.AddString("out", &out, "REPORT", "output folder (must not exist or be empty)");
   args.AddString("split", &split, "S", "holdout (default), train or all");
-  args.AddString("fit", &fit, "FIT", "fit folder: its fit_report.json and status.exr join the report");
-  args.AddString("samples", &samples, "SAMPLES", "sample store: its coverage.png joins the report");
+  args.AddString("fit", &fit, "FIT",
+                 "fit folder: its fit_report.json and status.exr join the report, and each worst "
+                 "pixel names the texel it shows (params.exr's atlas) and its model");
+  args.AddString("samples", &samples, "SAMPLES",
+                 "sample store: its coverage.png joins the report, and each worst pixel's texel "
+                 "its train samples (how many, the brightest)");
   args.AddInt("max-figures", &options.max_figures,
               StrCat("figures at most, evenly spaced over the images (default ",
                      validate::kDefaultMaxFigures, ")"));
