@@ -581,6 +581,16 @@ constexpr double kKFoldMargin = 0.5;
 constexpr double kForeignLobeTrigger = 2.0;
 constexpr double kForeignLobeGain = 0.5;
 
+// A Lambert-only recipient takes a cluster lobe that costs it at most max(max_cost_increase, this
+// share of its Lambert cost) more. The tail of a sharp lobe depends on directions to a fraction
+// of a degree (n = 250 at 15 degrees from the mirror direction: +-0.5 degrees moves it +-75 %),
+// so where a texel's samples only touch that tail even the true lobe can cost a few noise units
+// more than Lambert: on the million preset the truth itself cost 113.7 against Lambert's 111.0
+// (216 residuals) and was refused at the absolute bar of 2, and held-out views lost the
+// highlight (photograph 42, render 0.34). 5 %: seed-11 capture rel. RMSE 0.0324 -> 0.0184, the
+// million preset 0.0292 -> 0.0183, DiLiGenT, suzanne and the demo unchanged.
+constexpr double kRelativeCostIncrease = 0.05;
+
 // The held-out cost of `params`' lobes (none when null) with the albedo re-fitted per fold on
 // the other folds: sum over folds of 1/2 sum w (y - rho_f / pi - lobe)^2 over the fold's samples.
 double CrossValidatedLobeCost(TexelResiduals* r, const brdf::BrdfParams* params, int folds) {
@@ -801,9 +811,10 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       // What the cluster lobe must beat: a Lambert-only texel's cost plus the allowed increase
       // (its samples do not contradict the lobe); a texel with a lobe, its BIC.
       const double k_own = fits->borrowed(t) ? 3.0 : double(own_params);
-      const double bar = lambert_only ? own_cost + max_increase
-                                      : own_cost - 0.5 * (k_own - 3.0) *
-                                                       std::log(double(std::max<size_t>(residuals, 1)));
+      const double bar =
+          lambert_only ? own_cost + std::max(max_increase, kRelativeCostIncrease * own_cost)
+                       : own_cost - 0.5 * (k_own - 3.0) *
+                                        std::log(double(std::max<size_t>(residuals, 1)));
       double best_cost = std::numeric_limits<double>::infinity();
       const brdf::BrdfParams* best = nullptr;
       std::array<float, brdf::kChannels> best_rho{};
@@ -823,7 +834,9 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         std::array<double, brdf::kChannels> brightest{};
         for (int c = 0; c < brdf::kChannels; ++c) {
           for (size_t s = 0; s < prepared.usable(); ++s) {
-            if (prepared.w(c)[s] > 0) brightest[size_t(c)] = std::max(brightest[size_t(c)], double(prepared.y(c)[s]));
+            if (prepared.w(c)[s] > 0) {
+              brightest[size_t(c)] = std::max(brightest[size_t(c)], double(prepared.y(c)[s]));
+            }
           }
         }
         double foreign_cost = std::numeric_limits<double>::infinity();

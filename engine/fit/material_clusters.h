@@ -37,8 +37,9 @@
 //      least kMinTransferSamples samples whose cluster kept lobes compares, on its own samples,
 //      its fit with each kept lobe (albedo re-fitted):
 //        - a Lambert-only texel (kUnidentifiableLobe, kTooFewSamples, or lobe absent) takes the
-//          lowest-cost lobe that costs at most max_cost_increase more than its Lambert fit: its
-//          samples do not contradict it (lobe transfer's test);
+//          lowest-cost lobe that costs at most max(max_cost_increase, 5 % of its Lambert cost)
+//          more than its Lambert fit: its samples do not contradict it (lobe transfer's test,
+//          relative as well: a sharp lobe's tail at a texel's samples is uncertain);
 //        - a texel with a lobe (its own, or a neighbour's) takes the cluster lobe when it
 //          predicts the texel's held-out photographs better (ModelChoice::kKFold, the default):
 //          the samples fall into `folds` folds by photograph (PhotographFold); a

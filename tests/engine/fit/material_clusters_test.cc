@@ -12,6 +12,7 @@
 
 #include "engine/brdf/lafortune.h"
 #include "engine/fit/fit_store.h"
+#include "engine/fit/lobe_transfer.h"
 #include "tests/engine/fit/fit_test_util.h"
 #include "tests/engine/fit/transfer_fixtures.h"
 
@@ -182,6 +183,77 @@ TEST(MaterialClusters, ARecipientWhoseSamplesContradictItsClustersLobeTakesTheLo
     EXPECT_NEAR(f.params.lobes[0][0].n, want.lobes[0][0].n, 1e-2 * want.lobes[0][0].n) << t;
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(f.params.rho_d[size_t(c)], kGlossyAlbedo[size_t(c)], 1e-2) << t;
   }
+}
+
+// A recipient of a sharp material whose samples reach the lobe's tail only, reading less there
+// than the lobe predicts by `tail_share` of it (as a direction error of a fraction of a degree
+// makes them: the tail of n = 250 moves +-75 % per 0.5 degrees): 60 samples, 8 of them 15
+// degrees from the mirror direction (the tail ~3 sigma), the rest 40+ degrees away; sigma 1 %
+// of the value, deviations of 2 sigma with alternating signs.
+std::vector<BrdfSample> TailSamples(const brdf::BrdfParams& truth, int texel, double tail_share) {
+  std::vector<BrdfSample> out;
+  brdf::BrdfParams lambert = truth;
+  for (int c = 0; c < 3; ++c) lambert.lobes[0][size_t(c)] = {0, 0, 0, 1};
+  for (int i = 0; i < 60; ++i) {
+    const double theta = 30 + 3 * ((i + texel) % 8), phi = 29.0 * i;
+    // Azimuth offset of wo from the mirror direction that puts it `a` degrees from it:
+    // cos a = sin^2 theta cos off + cos^2 theta.
+    const double st = std::sin(DegToRad(theta)), ct = std::cos(DegToRad(theta));
+    const double off = i < 8 ? RadToDeg(std::acos((std::cos(DegToRad(15.0)) - ct * ct) / (st * st)))
+                             : 40 + 2 * (i % 30);
+    const Vec3f wi = Direction(theta, phi), wo = Direction(theta, phi + 180 + off);
+    BrdfSample s = testing::ExactSample(truth, wi, wo);
+    const BrdfSample flat = testing::ExactSample(lambert, wi, wo);
+    for (int c = 0; c < 3; ++c) {
+      const double tail = s.value[c] - flat.value[c];
+      const double y = (flat.value[c] + (1 - tail_share) * tail) * (1 + 0.02 * (i % 2 ? 1 : -1));
+      s.value[c] = float(y);
+      s.weight[c] = float(1 / std::pow(0.01 * flat.value[c], 2));
+    }
+    s.image = uint32_t(i);
+    out.push_back(s);
+  }
+  return out;
+}
+
+TEST(MaterialClusters, ASharpLobesTailReadingSlightlyLowIsNoContradiction) {
+  // Texels 40..47 read 55 % of the tail low: the lobe costs them more than Lambert by more than
+  // the absolute bar (2) but less than 5 % of their Lambert cost, and they take it; texels
+  // 48..55 read none of it: a contradiction, refused.
+  const brdf::BrdfParams sharp = [] {
+    brdf::BrdfParams p = Glossy();
+    for (int c = 0; c < 3; ++c) p.lobes[0][size_t(c)] = brdf::MirrorLobe(20, 250);
+    return p;
+  }();
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  for (int t = 0; t < 56; ++t) {
+    fits.push_back(t < 40 ? DonorFit(sharp) : RecipientFit(kGlossyAlbedo));
+    samples.push_back(t < 40 ? HighlightSamples(sharp, t) : TailSamples(sharp, t, t < 48 ? 0.55 : 1.0));
+  }
+  // The scenario's premise, on the recipients' own samples: the true lobe against Lambert.
+  for (int t : {40, 48}) {
+    std::vector<UsableSample> usable;
+    for (const BrdfSample& x : samples[size_t(t)]) usable.push_back(PrepareUsableSample(x, 0.0));
+    std::array<float, 3> rho{};
+    const double lambert = RefitAlbedoCost(samples[size_t(t)].data(), 60, usable.data(), nullptr, &rho);
+    const double lobe = RefitAlbedoCost(samples[size_t(t)].data(), 60, usable.data(), &sharp, &rho);
+    std::printf("texel %d: Lambert %.1f, the true lobe %.1f\n", t, lambert, lobe);
+    if (t == 40) {
+      ASSERT_GT(lobe - lambert, 2.0);
+      ASSERT_LT(lobe - lambert, 0.05 * lambert);
+    } else {
+      ASSERT_GT(lobe - lambert, 0.05 * lambert);
+    }
+  }
+  const TexelSampleChunk chunk = Chunk(samples);
+  FitStore store = StoreOf(fits);
+  const MaterialClusterStats stats = RunClusters(chunk, &store);
+  ASSERT_EQ(stats.clusters_with_lobe, 1);
+  for (size_t t = 40; t < 56; ++t) {
+    EXPECT_EQ(store.donor(t), t < 48 ? FitStore::kClusterLobe : FitStore::kNoDonor) << t;
+  }
+  EXPECT_EQ(stats.rejected, 8u);
 }
 
 TEST(MaterialClusters, ThePooledFitRecoversTheLobeNoDonorGotRight) {
