@@ -77,14 +77,13 @@ bool Borrowed(const FitStore& fits, size_t t) {
 // pow calls (the pass's main cost: 2.5 s of the million store's fit before). Exact up to float
 // rounding: sqrt is correctly rounded, each product adds half an ulp.
 constexpr std::array<double, 7> kGridThisComputes = {0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0};
-static_assert(kFalloffExponents.size() == kGridThisComputes.size() &&
-                  kFalloffExponents[0] == kGridThisComputes[0] &&
-                  kFalloffExponents[1] == kGridThisComputes[1] &&
-                  kFalloffExponents[2] == kGridThisComputes[2] &&
-                  kFalloffExponents[3] == kGridThisComputes[3] &&
-                  kFalloffExponents[4] == kGridThisComputes[4] &&
-                  kFalloffExponents[5] == kGridThisComputes[5] &&
-                  kFalloffExponents[6] == kGridThisComputes[6],
+constexpr bool IsTheGridThisComputes(const std::array<double, 7>& grid) {
+  for (size_t k = 0; k < grid.size(); ++k) {
+    if (grid[k] != kGridThisComputes[k]) return false;
+  }
+  return true;
+}
+static_assert(IsTheGridThisComputes(kFalloffExponents),
               "FalloffBases computes this grid: change both together");
 std::array<double, 7> FalloffBases(double x) {
   const double half = std::sqrt(x), quarter = std::sqrt(half);

@@ -84,6 +84,10 @@ UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta) {
   return u;
 }
 
+namespace {
+
+// Channel c of `params` in the EvalChannel layout with the albedo slot zeroed: its lobes only
+// (no term at all when `params` is null).
 std::array<float, brdf::kMaxParamsPerChannel> LobeChannel(const brdf::BrdfParams* params, int c) {
   std::array<float, brdf::kMaxParamsPerChannel> channel{};
   if (params) channel = params->Channel(c);
@@ -91,6 +95,9 @@ std::array<float, brdf::kMaxParamsPerChannel> LobeChannel(const brdf::BrdfParams
   return channel;
 }
 
+// Sample s's channel c as a weighted residual against the model `channel` (EvalChannel layout,
+// `lobes` lobes): false when it is none (the sample not usable, its weight not > 0 or either
+// value non-finite); else *w its weight and *e = y - f(wi, wo).
 bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const float* channel,
                      int lobes, double* w, double* e) {
   const float weight = s.weight[c], y = s.value[c];
@@ -99,6 +106,8 @@ bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const fl
   *e = double(y) - double(brdf::EvalChannel(u.wi, u.wo, channel, lobes));
   return true;
 }
+
+}  // namespace
 
 // Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null) and
 // its cost, in one pass: with e = y - lobe, S0 = sum w, S1 = sum w e, S2 = sum w e^2, the
@@ -189,6 +198,18 @@ const float* TexelResiduals::Model(const brdf::BrdfParams& params, int c) {
   return values_.data();
 }
 
+std::array<double, brdf::kChannels> TexelResiduals::Brightest() const {
+  std::array<double, brdf::kChannels> brightest{};
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    for (size_t i = 0; i < usable_; ++i) {
+      if (w_[size_t(c)][i] > 0) {
+        brightest[size_t(c)] = std::max(brightest[size_t(c)], double(y_[size_t(c)][i]));
+      }
+    }
+  }
+  return brightest;
+}
+
 double RefitAlbedoCost(TexelResiduals* r, const brdf::BrdfParams* params,
                        std::array<float, brdf::kChannels>* rho) {
   double cost = 0;
@@ -225,6 +246,13 @@ double LobeSupremum(const brdf::BrdfParams& p, int c) {
   return sum;
 }
 
+bool WithinEvidence(const brdf::BrdfParams& p,
+                    const std::array<double, brdf::kChannels>& brightest) {
+  for (int c = 0; c < brdf::kChannels; ++c) {
+    if (!(LobeSupremum(p, c) <= kMaxLobeSupremum * brightest[size_t(c)])) return false;
+  }
+  return true;
+}
 
 std::vector<uint32_t> LobeCandidates::Of(uint32_t t) const {
   const auto it = std::lower_bound(recipients.begin(), recipients.end(), t);
@@ -332,12 +360,7 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
       const double lambert_cost = RefitAlbedoCost(&residuals, nullptr, &rho);
       // The evidence bound of the texel's own fit (problem.h kMaxLobeSupremum): a lobe may rise
       // at most 10x above the brightest value the texel showed, per channel.
-      std::array<double, brdf::kChannels> brightest{};
-      for (int c = 0; c < brdf::kChannels; ++c) {
-        for (size_t k = 0; k < residuals.padded(); ++k) {
-          if (residuals.w(c)[k] > 0) brightest[c] = std::max(brightest[c], double(residuals.y(c)[k]));
-        }
-      }
+      const std::array<double, brdf::kChannels> brightest = residuals.Brightest();
       double best_cost = lambert_cost + options.max_cost_increase;
       int64_t best = -1;
       std::array<float, brdf::kChannels> best_rho{};
@@ -346,12 +369,7 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
            ++j) {
         const uint32_t donor = candidates.donors[size_t(j)];
         const brdf::BrdfParams lobes = fits->Get(donor).params;
-        bool within_evidence = true;
-        for (int c = 0; c < brdf::kChannels; ++c) {
-          within_evidence =
-              within_evidence && LobeSupremum(lobes, c) <= kMaxLobeSupremum * brightest[c];
-        }
-        if (!within_evidence) continue;
+        if (!WithinEvidence(lobes, brightest)) continue;
         const double cost = RefitAlbedoCost(&residuals, &lobes, &rho);
         if (std::isfinite(cost) && cost <= best_cost) {
           best_cost = cost;

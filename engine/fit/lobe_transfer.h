@@ -89,16 +89,6 @@ struct UsableSample {
 };
 UsableSample PrepareUsableSample(const BrdfSample& s, double min_cos_theta);
 
-// Channel c of `params` in the EvalChannel layout with the albedo slot zeroed: its lobes only
-// (no term at all when `params` is null).
-std::array<float, brdf::kMaxParamsPerChannel> LobeChannel(const brdf::BrdfParams* params, int c);
-
-// Sample s's channel c as a weighted residual against the model `channel` (EvalChannel layout,
-// `lobes` lobes): false when it is none (the sample not usable, its weight not > 0 or either
-// value non-finite); else *w its weight and *e = y - f(wi, wo).
-bool ChannelResidual(const BrdfSample& s, const UsableSample& u, int c, const float* channel,
-                     int lobes, double* w, double* e);
-
 // Per channel: the albedo re-fit with `params`' lobes fixed (no lobes when `params` is null),
 // written to `rho`, and the summed cost 1/2 sum w r^2 over the usable samples.
 double RefitAlbedoCost(const BrdfSample* samples, size_t count, const UsableSample* usable,
@@ -126,6 +116,8 @@ class TexelResiduals {
   const float* w(int c) const { return w_[size_t(c)].data(); }
   const uint8_t* fold() const { return fold_.data(); }
   const float* zz() const { return zz_.data(); }  // cos theta_i cos theta_o
+  // Per channel the brightest value with a residual (0 when none): the evidence bound's scale.
+  std::array<double, brdf::kChannels> Brightest() const;
 
  private:
   void Resize(size_t size);  // every per-entry array
@@ -143,6 +135,12 @@ double RefitAlbedoCost(TexelResiduals* r, const brdf::BrdfParams* params,
 
 // The largest value the lobes of `p` reach in channel c over the hemisphere.
 double LobeSupremum(const brdf::BrdfParams& p, int c);
+
+// The evidence bound of a texel's own fit (problem.h kMaxLobeSupremum) for a lobe it did not fit:
+// in every channel the lobes of `p` rise at most kMaxLobeSupremum times the texel's brightest
+// value (TexelResiduals::Brightest).
+bool WithinEvidence(const brdf::BrdfParams& p,
+                    const std::array<double, brdf::kChannels>& brightest);
 
 // Phase 1: for every recipient in `fits`, its candidate donors. fits.donor(t) >= 0 marks a texel
 // that borrowed its lobes in an earlier round: it lends them on and is no longer a recipient.

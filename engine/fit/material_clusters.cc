@@ -831,25 +831,12 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         // Its own cluster's lobe misfits the texel's samples: another cluster's lobe may fit
         // them (its material's albedo overlapping this cluster's). Held to the texel's own
         // evidence bound, as a neighbour's lobe is (lobe_transfer.h).
-        std::array<double, brdf::kChannels> brightest{};
-        for (int c = 0; c < brdf::kChannels; ++c) {
-          for (size_t s = 0; s < prepared.usable(); ++s) {
-            if (prepared.w(c)[s] > 0) {
-              brightest[size_t(c)] = std::max(brightest[size_t(c)], double(prepared.y(c)[s]));
-            }
-          }
-        }
+        const std::array<double, brdf::kChannels> brightest = prepared.Brightest();
         double foreign_cost = std::numeric_limits<double>::infinity();
         const brdf::BrdfParams* foreign = nullptr;
         std::array<float, brdf::kChannels> foreign_rho{};
         for (const auto& [j, lobe] : all_kept) {
-          if (j == k) continue;
-          bool within_evidence = true;
-          for (int c = 0; c < brdf::kChannels; ++c) {
-            within_evidence = within_evidence &&
-                              LobeSupremum(*lobe, c) <= kMaxLobeSupremum * brightest[size_t(c)];
-          }
-          if (!within_evidence) continue;
+          if (j == k || !WithinEvidence(*lobe, brightest)) continue;
           const double cost = RefitAlbedoCost(&prepared, lobe, &rho);
           if (std::isfinite(cost) && cost < foreign_cost) {
             foreign_cost = cost;

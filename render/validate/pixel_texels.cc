@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <map>
 #include <memory>
 
@@ -20,16 +21,6 @@ namespace reflcap::validate {
 namespace fs = std::filesystem;
 
 namespace {
-
-// fit_report.json's `key` names (an array indexed by code); empty when absent or malformed: the
-// table then shows the codes alone.
-std::vector<std::string> Names(const nlohmann::json& report, const char* key) {
-  std::vector<std::string> names;
-  const auto it = report.find(key);
-  if (it == report.end() || !it->is_array()) return names;
-  for (const auto& n : *it) names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
-  return names;
-}
 
 std::string NameOf(const std::vector<std::string>& names, int code) {
   return code >= 0 && size_t(code) < names.size() ? names[size_t(code)] : std::string();
@@ -63,6 +54,28 @@ StatusOr<std::vector<int64_t>> MeshTexels(const Capture& capture, const TexelAtl
 }
 
 }  // namespace
+
+std::vector<std::string> FitReportNames(const nlohmann::json& report, const char* key) {
+  std::vector<std::string> names;
+  const auto it = report.find(key);
+  if (it == report.end()) return names;
+  const auto text = [](const nlohmann::json& n) {
+    return n.is_string() ? n.get<std::string>() : n.dump();
+  };
+  if (it->is_array()) {
+    for (const auto& n : *it) names.push_back(text(n));
+  } else if (it->is_object()) {
+    for (auto n = it->begin(); n != it->end(); ++n) {
+      char* stop = nullptr;
+      const long code = std::strtol(n.key().c_str(), &stop, 10);
+      // Codes are small non-negative integers (statuses, models); anything else is skipped.
+      if (*stop || code < 0 || code > 255) continue;
+      if (names.size() <= size_t(code)) names.resize(size_t(code) + 1);
+      names[size_t(code)] = text(*n);
+    }
+  }
+  return names;
+}
 
 StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, const fs::path& fit_dir,
                                                     const fs::path& samples_dir,
@@ -116,8 +129,8 @@ StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, cons
     report = nlohmann::json::parse(*text, nullptr, false);
     if (!report.is_object()) report = nlohmann::json::object();
   }
-  const std::vector<std::string> status_names = Names(report, "status_names");
-  const std::vector<std::string> model_names = Names(report, "model_names");
+  const std::vector<std::string> status_names = FitReportNames(report, "status_names");
+  const std::vector<std::string> model_names = FitReportNames(report, "model_names");
   for (PixelTexel& p : out) {
     if (p.texel < 0) continue;
     const float* px = &codes.data[size_t(atlas.pixel_of_texel[size_t(p.texel)]) * codes.channels];
@@ -157,8 +170,9 @@ StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, cons
     const BrdfSample* s = chunk.SamplesOf(i);
     for (uint64_t k = 0; k < chunk.SampleCount(i); ++k) {
       for (int ch = 0; ch < 3; ++ch) {
-        if (s[k].weight[ch] > 0 && std::isfinite(s[k].weight[ch]) && std::isfinite(s[k].value[ch])) {
-          p.brightest[size_t(ch)] = std::max(p.brightest[size_t(ch)], s[k].value[ch]);
+        const float w = s[k].weight[ch], y = s[k].value[ch];
+        if (w > 0 && std::isfinite(w) && std::isfinite(y)) {
+          p.brightest[size_t(ch)] = std::max(p.brightest[size_t(ch)], y);
         }
       }
     }

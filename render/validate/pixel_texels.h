@@ -12,10 +12,17 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "engine/capture/capture.h"
 #include "engine/core/status.h"
 
 namespace reflcap::validate {
+
+// fit_report.json's names of codes under `key` ("status_names", "model_names"): an array indexed
+// by code, or an object from code ("0", "1", ...) to name; empty when absent or malformed (the
+// report then shows the codes alone).
+std::vector<std::string> FitReportNames(const nlohmann::json& report, const char* key);
 
 struct PixelQuery {
   size_t image = 0;  // capture.images index

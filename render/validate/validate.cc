@@ -745,22 +745,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
         if (auto it = j.find("texels_per_second"); it != j.end() && it->is_number()) {
           texels_per_second = it->get<double>();
         }
-        if (auto it = j.find("model_names"); it != j.end() && it->is_array()) {
-          for (const auto& n : *it) model_names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
-        }
-        if (auto it = j.find("status_names"); it != j.end()) {
-          if (it->is_array()) {
-            for (const auto& n : *it) status_names.push_back(n.is_string() ? n.get<std::string>() : n.dump());
-          } else if (it->is_object()) {
-            for (auto n = it->begin(); n != it->end(); ++n) {
-              char* stop = nullptr;
-              const long code = std::strtol(n.key().c_str(), &stop, 10);
-              if (*stop || code < 0 || code > 255) continue;
-              if (status_names.size() <= size_t(code)) status_names.resize(size_t(code) + 1);
-              status_names[size_t(code)] = n->is_string() ? n->get<std::string>() : n->dump();
-            }
-          }
-        }
+        model_names = FitReportNames(j, "model_names");
+        status_names = FitReportNames(j, "status_names");
       } else {
         fit_fields_html += "<p class=note>" + HtmlEscape(report.string()) + ": not valid JSON.</p>\n";
       }
