@@ -175,6 +175,7 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                                                            {kBindTexelOfPixel, kSsbo, kGfx}}));
   REFLCAP_ASSIGN_OR_RETURN(texel_layout,
                            DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kComp},
+                                                           {kBindCorners, kSsbo, kComp},
                                                            {kBindLightMap, kTex, kComp},
                                                            {kBindCameraMap, kTex, kComp},
                                                            {kBindTexels, kSsbo, kComp},
@@ -183,7 +184,8 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
                                                            {kBindOutcomes, kSsbo, kComp},
                                                            {kBindSamples, kSsbo, kComp},
                                                            {kBindVariance, kSsbo, kComp},
-                                                           {kBindCameraNormal, kTex, kComp}}));
+                                                           {kBindCameraNormal, kTex, kComp},
+                                                           {kBindTexelOfPixel, kSsbo, kComp}}));
   REFLCAP_ASSIGN_OR_RETURN(camera_set, DescriptorSet::Create(c, camera_layout));
   REFLCAP_ASSIGN_OR_RETURN(
       texel_pipeline,
@@ -197,6 +199,11 @@ Status VulkanMasks::Impl::Init(const TriangleMesh& mesh) {
   // Scene: de-indexed corners, triangle normals (the CPU's float GeometricNormal), texels.
   triangle_count = uint32_t(mesh.TriangleCount());
   if (triangle_count == 0) return InvalidArgumentError("the mesh has no triangles");
+  // The camera pass writes the triangle index as a float (exact below 2^24).
+  if (mesh.TriangleCount() >= (size_t(1) << 24)) {
+    return UnavailableError("Vulkan masks: the mesh's ", mesh.TriangleCount(),
+                            " triangles exceed the camera map's 2^24");
+  }
   std::vector<sh::MaskCorner> corner_data(size_t(triangle_count) * 3);
   std::vector<sh::vec4> normal_data(triangle_count);
   Eigen::AlignedBox3d box;
@@ -553,6 +560,8 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
     const uint64_t count = std::min<uint64_t>(m.chunk_texels, m.texel_count - first);
     DescriptorSet& set = m.texel_sets[c];
     set.WriteBuffer(kBindParams, *m.params);
+    set.WriteBuffer(kBindCorners, *m.corners);
+    set.WriteBuffer(kBindTexelOfPixel, *m.texel_of_pixel);
     set.WriteImage(kBindLightMap, m.light_pass.depth().array_view(), m.sampler.handle(), kRead);
     set.WriteImage(kBindCameraMap, m.camera_target->colors[0]->array_view(), m.sampler.handle(),
                    kRead);

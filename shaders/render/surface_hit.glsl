@@ -12,6 +12,7 @@
 #ifndef REFLCAP_SHADERS_RENDER_SURFACE_HIT_GLSL_
 #define REFLCAP_SHADERS_RENDER_SURFACE_HIT_GLSL_
 
+#include "common/ray_triangle.glsl"
 #include "render/camera.glsl"
 #include "render/render_inputs.glsl"
 
@@ -19,25 +20,12 @@
 #error "surface_hit.glsl reads the corner buffer: define REFLCAP_RENDER_CORNERS before the first include of render_inputs.glsl"
 #endif
 
-// Möller–Trumbore: t along the (unit) ray and the barycentrics (b0, b1, b2) of the point where it
-// meets the plane of triangle `tri`. False for a ray parallel to the plane.
+// t along the (unit) ray and the barycentrics (b0, b1, b2) of the point where it meets the plane
+// of triangle `tri` (common/ray_triangle.glsl). False for a ray parallel to the plane.
 bool IntersectPlane(vec3 o, vec3 d, uint tri, out float t, out vec3 b) {
-  vec3 v0 = corners[3u * tri].position_u.xyz;
-  vec3 e1 = corners[3u * tri + 1u].position_u.xyz - v0;
-  vec3 e2 = corners[3u * tri + 2u].position_u.xyz - v0;
-  vec3 pvec = cross(d, e2);
-  float det = dot(e1, pvec);
-  t = 0.0;
-  b = vec3(0.0);
-  if (det == 0.0) return false;
-  float inv = 1.0 / det;
-  vec3 tvec = o - v0;
-  float b1 = dot(tvec, pvec) * inv;
-  vec3 qvec = cross(tvec, e1);
-  float b2 = dot(d, qvec) * inv;
-  t = dot(e2, qvec) * inv;
-  b = vec3(1.0 - b1 - b2, b1, b2);
-  return true;
+  return RayTrianglePlane(o, d, corners[3u * tri].position_u.xyz,
+                          corners[3u * tri + 1u].position_u.xyz,
+                          corners[3u * tri + 2u].position_u.xyz, t, b);
 }
 
 // The surface of triangle `tri` at barycentrics (1 - b1 - b2, b1, b2): position, unit shading

@@ -5,20 +5,27 @@
 // camera, the depth p_cam.z for an orthographic one) and whether that point is lit as the
 // renderer decides it — both normals face the light and the light map holds no occluder
 // (LightShadowed) — and marks the texel as a hit. The depth test (LESS, on the projective depth)
-// keeps the nearest surface, as the CPU's first hit.
+// keeps the nearest surface, as the CPU's first hit. The rasteriser only picks the triangle: the
+// point, its normal and its UV come from the texel's exact ray meeting that triangle
+// (common/ray_triangle.glsl), since interpolated attributes carry the rasteriser's sub-pixel
+// snapping (measured on an NVIDIA H200: kept samples' values up to past the 1e-3 tolerance of
+// vulkan_masks_test at grazing light, where cos θi is small and its error is amplified).
 //
-// Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[] (vertex stage), 2 = triangle normals,
-// 3 = light map, 12 = the atlas's texel_of_pixel. Push constants: MaskDrawPush {view =
-// kMaskCameraView}.
-// Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, 0); location 1 (RGBA32F) = (the
+// Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[], 2 = triangle normals, 3 = light map,
+// 12 = the atlas's texel_of_pixel. Push constants: MaskDrawPush {view = kMaskCameraView}.
+// Outputs: location 0 (RGBA32F) = (distance, lit 0/1, hit = 1, the triangle index as a float:
+// exact below 2^24, which vulkan_masks.cc checks; masks.comp meets each photograph pixel's own ray
+// with it); location 1 (RGBA32F) = (the
 // hit's unit shading normal, the texel under its UV as a float, -1 = none), what
 // SamplePoint::kPixel measures a sample with and which texel it measured; the clear value 0 =
 // background.
 #extension GL_GOOGLE_include_directive : require
 
+#define REFLCAP_MASK_CORNERS
 #define REFLCAP_MASK_TRIANGLES
 #define REFLCAP_MASK_LIGHT_MAP
 #define REFLCAP_MASK_TEXEL_OF_PIXEL
+#include "common/ray_triangle.glsl"
 #include "resample/masks_common.glsl"
 
 layout(push_constant) uniform Push { MaskDrawPush push; };
@@ -29,18 +36,55 @@ layout(location = 2) in vec2 in_uv;
 layout(location = 0) out vec4 out_map;
 layout(location = 1) out vec4 out_normal;
 
+// The object-frame ray through camera-map texel `map_pixel` (centres at integer coordinates):
+// the map's own pinhole intrinsics (the photograph's, or the undistorted grid's of a distorted
+// camera; vulkan_masks.cc CameraGrid) from the camera centre, or an orthographic camera's parallel
+// ray from the plane z = 0 (Camera::PixelRay's cx = (width - 1) / 2).
+void MapTexelRay(vec2 map_pixel, out vec3 o, out vec3 d) {
+  vec3 d_cam = vec3(0.0, 0.0, 1.0), o_cam = vec3(0.0);
+  if ((params.flags & kMaskFlagPinhole) != 0u) {
+    vec4 k = params.map_intrinsics;  // fx, fy, cx, cy
+    float yn = (map_pixel.y - k.w) / k.y;
+    float xn = (map_pixel.x - k.z - params.map_intrinsics_extra.x * yn) / k.x;
+    d_cam = vec3(xn, yn, 1.0);
+  } else {
+    float pixel_m = params.intrinsics_extra.y;
+    o_cam = vec3((map_pixel.x - 0.5 * float(params.map_width - 1u)) * pixel_m,
+                 (map_pixel.y - 0.5 * float(params.map_height - 1u)) * pixel_m, 0.0);
+  }
+  o = MaskTransform3(params.object_from_cam, o_cam, 1.0);
+  d = normalize(MaskTransform3(params.object_from_cam, d_cam, 0.0));
+}
+
 void main() {
   vec3 p = in_position;
+  vec3 n_interp = in_normal;
+  vec2 uv = in_uv;
+  uint tri = uint(gl_PrimitiveID);
+  vec3 o, d;
+  MapTexelRay(gl_FragCoord.xy - 0.5, o, d);
+  float t;
+  vec3 b;
+  // A ray parallel to the triangle's plane (seen edge-on) keeps the interpolated attributes.
+  if (RayTrianglePlane(o, d, corners[3u * tri].position.xyz, corners[3u * tri + 1u].position.xyz,
+                       corners[3u * tri + 2u].position.xyz, t, b) &&
+      t > 0.0) {
+    MaskCorner c0 = corners[3u * tri], c1 = corners[3u * tri + 1u], c2 = corners[3u * tri + 2u];
+    p = b.x * c0.position.xyz + b.y * c1.position.xyz + b.z * c2.position.xyz;
+    n_interp = b.x * c0.normal.xyz + b.y * c1.normal.xyz + b.z * c2.normal.xyz;
+    uv = b.x * vec2(c0.position.w, c0.normal.w) + b.y * vec2(c1.position.w, c1.normal.w) +
+         b.z * vec2(c2.position.w, c2.normal.w);
+  }
   vec3 centre = params.camera_centre.xyz;
   float distance = (params.flags & kMaskFlagPinhole) != 0u ? length(p - centre)
                                                            : dot(p - centre, -params.toward_cam.xyz);
-  vec3 n_g = triangle_normals[gl_PrimitiveID].xyz;
+  vec3 n_g = triangle_normals[tri].xyz;
   // A degenerate interpolated normal (opposite corner normals) cannot face the light.
-  float len = length(in_normal);
-  vec3 n_s = len > 0.0 ? in_normal / len : vec3(0.0);
+  float len = length(n_interp);
+  vec3 n_s = len > 0.0 ? n_interp / len : vec3(0.0);
   float dist;
   vec3 wi = ToLight(p, dist);
   bool lit = dot(n_s, wi) > 0.0 && dot(n_g, wi) > 0.0 && !LightShadowed(p, n_g);
-  out_map = vec4(distance, lit ? 1.0 : 0.0, 1.0, 0.0);
-  out_normal = vec4(n_s, float(MaskTexelUnderUv(in_uv)));
+  out_map = vec4(distance, lit ? 1.0 : 0.0, 1.0, float(tri));
+  out_normal = vec4(n_s, float(MaskTexelUnderUv(uv)));
 }

@@ -7,20 +7,26 @@
 //   view grazing -> projection (four bilinear taps inside the image) -> camera map (occluded) ->
 //   light grazing -> light map (shadowed) -> footprint: every tap's camera-map texel is a hit
 //   within the edge depth tolerance of the texel, and lit -> pixel values (invalid, clipped,
-//   invalid below the noise, dark) -> the BRDF sample. With kMaskFlagPixelSample
-//   (SamplePoint::kPixel) the sample is the tap whose hit lies in the texel (the camera pass's
-//   second attachment's w) nearest its centre, else — kMaskFlagPointPixels, the texel resolved:
-//   kMaskEdgeTexel — the tap whose hit is nearest, with the hit's position (its ray and
-//   camera-map distance), shading normal (that attachment's xyz), directions and light
-//   distance, as the CPU's; else the bilinear value at the texel centre's geometry.
+//   invalid below the noise, dark) -> the BRDF sample. Each tap's hit is where the pixel's own
+//   ray meets the triangle its camera-map texel saw (the map's w; common/ray_triangle.glsl), as
+//   the CPU's pixel map (ImageResampler::CastPixels) traces it: distance, shading normal and the
+//   texel under its UV are the CPU's to float rounding on any device — neither the rasteriser's
+//   sub-pixel snapping nor, for a distorted camera, the up to half a texel between a pixel's ray
+//   and its map texel's ray moves them. With kMaskFlagPixelSample (SamplePoint::kPixel) the sample
+//   is the tap whose hit lies in the texel nearest its centre, else — kMaskFlagPointPixels, the
+//   texel resolved: kMaskEdgeTexel — the tap whose hit is nearest, with the hit's position,
+//   shading normal, directions and light distance, as the CPU's; else the bilinear value at the
+//   texel centre's geometry.
 // Loops: at most 4 taps x 3 channels (twice with a variance image) per invocation, far below
 // lavapipe's 65,535-step cut.
 //
-// Bindings (set 0): 0 = MaskParams, 3 = light map, 4 = camera map, 5 = MaskTexel[] (this chunk),
+// Bindings (set 0): 0 = MaskParams, 1 = MaskCorner[], 3 = light map, 4 = camera map,
+// 5 = MaskTexel[] (this chunk),
 // 6 = pixel rays (vec2 per pixel, pinhole cameras), 7 = photograph (float RGB, row-major),
 // 8 = outcome per texel (this chunk), 9 = MaskSample per texel (this chunk; written when kept),
 // 10 = the photograph's variance image (float RGB, row-major; read only when
-// params.relative_sigma_floor.y = 1, see "Noise" below), 11 = camera normal map.
+// params.relative_sigma_floor.y = 1, see "Noise" below), 11 = camera normal map (a tap whose ray
+// is parallel to its triangle keeps the map's attributes), 12 = the atlas's texel_of_pixel.
 //
 // Noise: with the variance image, a sample's variance is MeasuredVariance (Σ w_k² var_k over the
 // bilinear taps) plus the relative floor, and its invalid / dark tests compare each channel with
@@ -30,8 +36,11 @@
 // Push constants: MaskTexelPush {first_texel, count}. Specialization constant 0: local_size_x.
 #extension GL_GOOGLE_include_directive : require
 
+#define REFLCAP_MASK_CORNERS
 #define REFLCAP_MASK_LIGHT_MAP
 #define REFLCAP_MASK_CAMERA_MAP
+#define REFLCAP_MASK_TEXEL_OF_PIXEL
+#include "common/ray_triangle.glsl"
 #include "resample/masks_common.glsl"
 
 layout(local_size_x = 64, local_size_x_id = 0) in;
@@ -98,6 +107,43 @@ ivec2 MapTexelOfPixel(int x, int y) {
 
 bool InMap(ivec2 t) {
   return t.x >= 0 && t.y >= 0 && t.x < int(params.map_width) && t.y < int(params.map_height);
+}
+
+// What photograph pixel ray (origin, dir) hits, from its camera-map texel t (a hit, m its first
+// attachment): the ray met with the triangle the texel saw (m.w) — distance along the ray, unit
+// shading normal and the texel under the UV (-1 = none), as CastPixels interpolates them at
+// Embree's barycentrics. A ray parallel to that triangle's plane, or meeting it behind the camera,
+// keeps the map texel's own values.
+struct TapHit {
+  float distance;
+  vec3 n_s;
+  float texel;
+};
+TapHit TapHitOf(vec3 origin, vec3 dir, ivec2 t, vec4 m) {
+  uint tri = uint(m.w);
+  float dist;
+  vec3 b;
+  TapHit h;
+  if (RayTrianglePlane(origin, dir, corners[3u * tri].position.xyz,
+                       corners[3u * tri + 1u].position.xyz, corners[3u * tri + 2u].position.xyz,
+                       dist, b) &&
+      dist > 0.0) {
+    MaskCorner c0 = corners[3u * tri], c1 = corners[3u * tri + 1u], c2 = corners[3u * tri + 2u];
+    vec3 n = b.x * c0.normal.xyz + b.y * c1.normal.xyz + b.z * c2.normal.xyz;
+    float len = length(n);
+    // A degenerate interpolated normal (opposite corner normals) faces nothing, as the camera pass.
+    h.n_s = len > 0.0 ? n / len : vec3(0.0);
+    h.distance = dist;
+    h.texel = float(MaskTexelUnderUv(b.x * vec2(c0.position.w, c0.normal.w) +
+                                     b.y * vec2(c1.position.w, c1.normal.w) +
+                                     b.z * vec2(c2.position.w, c2.normal.w)));
+    return h;
+  }
+  vec4 a = texelFetch(camera_normal_map, ivec3(t, 0), 0);
+  h.distance = m.x;
+  h.n_s = a.xyz;
+  h.texel = a.w;
+  return h;
 }
 
 // Whether the camera map holds a surface in front of texel p (geometric normal n_g) along the
@@ -269,8 +315,7 @@ void main() {
   int nearest = -1;
   bool nearest_inside = false;
   float nearest_d2 = 0.0;
-  vec3 nearest_hit = vec3(0.0), nearest_dir = vec3(0.0);
-  ivec2 nearest_map = ivec2(0);
+  vec3 nearest_hit = vec3(0.0), nearest_dir = vec3(0.0), nearest_normal = vec3(0.0);
   for (int k = 0; k < 4 && outcome == kMaskKept; ++k) {
     if (w[k] == 0.0) continue;
     ivec2 t = MapTexelOfPixel(tap[k].x, tap[k].y);
@@ -281,17 +326,17 @@ void main() {
     }
     vec3 origin, dir;
     PixelRay(tap[k].x, tap[k].y, origin, dir);
-    if (!(abs(m.x + dot(origin - p, dir)) <= tolerance)) {
+    TapHit th = TapHitOf(origin, dir, t, m);
+    if (!(abs(th.distance + dot(origin - p, dir)) <= tolerance)) {
       outcome = kMaskEdgeSurface;
       break;
     }
     if (!(m.y > 0.5)) outcome = kMaskEdgeShadow;
-    vec3 hit = origin + m.x * dir;
+    vec3 hit = origin + th.distance * dir;
     vec3 to_hit = hit - p;
     float d2 = dot(to_hit, to_hit);
     bool in_texel = (params.flags & kMaskFlagPixelSample) != 0u &&
-                    texelFetch(camera_normal_map, ivec3(t, 0), 0).w ==
-                        float(push.first_texel + local);
+                    th.texel == float(push.first_texel + local);
     if (nearest < 0 || (in_texel && !nearest_inside) ||
         (in_texel == nearest_inside && d2 < nearest_d2)) {
       nearest = k;
@@ -299,7 +344,7 @@ void main() {
       nearest_d2 = d2;
       nearest_hit = hit;
       nearest_dir = dir;
-      nearest_map = t;
+      nearest_normal = th.n_s;
     }
   }
   if (outcome != kMaskKept) {
@@ -314,7 +359,7 @@ void main() {
   }
   if ((params.flags & kMaskFlagPixelSample) != 0u) {
     // The sample is the nearest tap's pixel at its hit's geometry (the CPU's SamplePoint::kPixel).
-    n_s = texelFetch(camera_normal_map, ivec3(nearest_map, 0), 0).xyz;
+    n_s = nearest_normal;
     v = -nearest_dir;
     wi = ToLight(nearest_hit, dist);
     cos_i = dot(n_s, wi);
