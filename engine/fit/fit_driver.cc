@@ -105,6 +105,11 @@ TexelModel TexelModelOf(const FitStore& fits, size_t t) {
                                                  : TexelModel::kLambertNoEvidence;
 }
 
+// Work per ParallelFor task while the maps are filled: large enough that a thread's start is
+// negligible, small enough to balance (a million-texel atlas is ~1,300 rows).
+constexpr int64_t kMapRowsPerTask = 16;
+constexpr int64_t kMapTexelsPerTask = 1 << 14;
+
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled,
                     const std::vector<int32_t>& cluster_of, int threads) {
@@ -114,24 +119,30 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   REFLCAP_CHECK(cluster_of.empty() || cluster_of.size() == fits->size());
   {
     constexpr int kStatusChannels = 7;
+    // The maps are filled on all threads (each texel owns its pixel), then compressed on them.
     Image status(atlas.width, atlas.height, kStatusChannels, 0.0f);
-    for (size_t p = 0; p < status.PixelCount(); ++p) {
-      status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
-      status.data[kStatusChannels * p + 3] = -1;
-      status.data[kStatusChannels * p + 5] = -1;
-      status.data[kStatusChannels * p + 6] = -1;
-    }
-    for (size_t t = 0; t < fits->size(); ++t) {
-      float* px = &status.data[kStatusChannels * size_t(atlas.pixel_of_texel[t])];
-      px[0] = float(int(fits->status(t)));
-      px[1] = float(fits->iterations(t));
-      px[2] = fits->cost(t);
-      // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
-      px[3] = float(fits->donor(t));
-      px[4] = albedo_filled.empty() ? 0.0f : float(albedo_filled[t]);
-      px[5] = cluster_of.empty() ? -1.0f : float(cluster_of[t]);
-      px[6] = float(int(TexelModelOf(*fits, t)));
-    }
+    ParallelFor(0, int64_t(status.PixelCount()), kMapRowsPerTask * atlas.width,
+                [&](int64_t begin, int64_t end, int) {
+      for (int64_t p = begin; p < end; ++p) {
+        status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
+        status.data[kStatusChannels * p + 3] = -1;
+        status.data[kStatusChannels * p + 5] = -1;
+        status.data[kStatusChannels * p + 6] = -1;
+      }
+    }, threads);
+    ParallelFor(0, int64_t(fits->size()), kMapTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+      for (int64_t t = begin; t < end; ++t) {
+        float* px = &status.data[kStatusChannels * size_t(atlas.pixel_of_texel[t])];
+        px[0] = float(int(fits->status(t)));
+        px[1] = float(fits->iterations(t));
+        px[2] = fits->cost(t);
+        // Texel indices below 2^24 are exact in float; atlases stay far below (16.7 M texels).
+        px[3] = float(fits->donor(t));
+        px[4] = albedo_filled.empty() ? 0.0f : float(albedo_filled[t]);
+        px[5] = cluster_of.empty() ? -1.0f : float(cluster_of[t]);
+        px[6] = float(int(TexelModelOf(*fits, t)));
+      }
+    }, threads);
     REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "status.exr", status,
                                              {"status", "iterations", "cost", "lobe_donor",
                                               "albedo_filled", "material_cluster", "model"},
@@ -143,9 +154,11 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   const int n = int(channel.size());
   {
     Image params(atlas.width, atlas.height, n, 0.0f);
-    for (size_t t = 0; t < fits->size(); ++t) {
-      PutTexel(channel, fits->params(t), &params.data[size_t(atlas.pixel_of_texel[t]) * n]);
-    }
+    ParallelFor(0, int64_t(fits->size()), kMapTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+      for (int64_t t = begin; t < end; ++t) {
+        PutTexel(channel, fits->params(t), &params.data[size_t(atlas.pixel_of_texel[t]) * n]);
+      }
+    }, threads);
     // The parameters are in the image now: freed before it is written.
     fits->ReleaseParams();
     REFLCAP_RETURN_IF_ERROR(

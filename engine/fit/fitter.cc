@@ -167,6 +167,12 @@ Status ValidateChunk(const TexelSampleChunk& chunk) {
   return OkStatus();
 }
 
+int TexelsPerTask(uint32_t texels, int workers) {
+  const uint64_t tasks = uint64_t(std::max(workers, 1)) * kMinTasksPerWorker;
+  const uint64_t even = (uint64_t(texels) + tasks - 1) / tasks;
+  return int(std::clamp<uint64_t>(even, kMinTexelsPerTask, kTexelsPerTask));
+}
+
 Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
                        std::vector<TexelFit>* results) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());
@@ -177,14 +183,15 @@ Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
   const int workers = options.threads > 0 ? options.threads : threads();
   results->resize(texels);
 
+  const int task_texels = TexelsPerTask(texels, workers);
   // Size every workspace for the largest task before the parallel loop.
   size_t max_task_samples = 0, max_samples = 0;
-  for (uint32_t b = 0; b < texels; b += kTexelsPerTask) {
-    const uint32_t e = std::min<uint32_t>(texels, b + kTexelsPerTask);
+  for (uint32_t b = 0; b < texels; b += task_texels) {
+    const uint32_t e = std::min<uint32_t>(texels, b + task_texels);
     max_task_samples = std::max<size_t>(max_task_samples, chunk.offsets[e] - chunk.offsets[b]);
   }
   for (uint32_t t = 0; t < texels; ++t) max_samples = std::max<size_t>(max_samples, chunk.SampleCount(t));
-  const size_t max_problems = size_t(kTexelsPerTask) * ProblemsPerTexel(layout.model);
+  const size_t max_problems = size_t(task_texels) * ProblemsPerTexel(layout.model);
   if (workspaces_.size() < size_t(workers)) workspaces_.resize(workers);
   for (Workspace& w : workspaces_) {
     w.arena.Reserve(3 * max_task_samples, max_samples);
@@ -199,7 +206,7 @@ Status FitterBase::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
   }
 
   ParallelFor(
-      0, texels, kTexelsPerTask,
+      0, texels, task_texels,
       [&](int64_t begin, int64_t end, int worker) {
         Workspace& w = workspaces_[worker];
         const int per_texel = ProblemsPerTexel(layout.model);

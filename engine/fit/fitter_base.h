@@ -15,6 +15,14 @@ namespace reflcap::fit::internal {
 // Texels per ParallelFor task: enough problems to keep 16 lanes refilled (3 x 256 = 768), few
 // enough that 2 workers balance on small chunks.
 constexpr int kTexelsPerTask = 256;
+// A chunk too small to give every worker kMinTasksPerWorker tasks of kTexelsPerTask is cut finer,
+// down to kMinTexelsPerTask (48 problems: three refills of 16 lanes). The k-fold refits of the
+// material clusters fit a few hundred texels per call, one call per store chunk and fold: at 256
+// texels a task, 3 of 16 workers had work.
+constexpr int kMinTasksPerWorker = 4;
+constexpr int kMinTexelsPerTask = 16;
+// Texels per task for a chunk of `texels` on `workers` workers (kTexelsPerTask at most).
+int TexelsPerTask(uint32_t texels, int workers);
 
 // InvalidArgument unless chunk.offsets describe chunk.samples (texel_count + 1 non-decreasing
 // entries from 0 to samples.size()); every backend checks this before fitting.

@@ -707,17 +707,32 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
       std::vector<TexelFit> fold_fit;
       for (int f = 0; f < folds && !refit.empty(); ++f) {
+        // The refitted texels' samples outside fold f: counted, then copied, in parallel.
         TexelSampleChunk train;
         train.first_texel = 0;
         train.texel_count = uint32_t(refit.size());
-        train.offsets.push_back(0);
-        for (uint32_t i : refit) {
-          const BrdfSample* samples = chunk.SamplesOf(i);
-          for (size_t s = 0; s < chunk.SampleCount(i); ++s) {
-            if (FoldOf(samples[s], folds) != f) train.samples.push_back(samples[s]);
+        train.offsets.assign(refit.size() + 1, 0);
+        ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
+          for (int64_t j = begin; j < end; ++j) {
+            const uint32_t i = refit[size_t(j)];
+            const BrdfSample* samples = chunk.SamplesOf(i);
+            uint64_t n = 0;
+            for (size_t s = 0; s < chunk.SampleCount(i); ++s) n += FoldOf(samples[s], folds) != f;
+            train.offsets[size_t(j) + 1] = n;
           }
-          train.offsets.push_back(train.samples.size());
-        }
+        }, options.threads);
+        for (size_t j = 0; j < refit.size(); ++j) train.offsets[j + 1] += train.offsets[j];
+        train.samples.resize(train.offsets.back());
+        ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
+          for (int64_t j = begin; j < end; ++j) {
+            const uint32_t i = refit[size_t(j)];
+            const BrdfSample* samples = chunk.SamplesOf(i);
+            BrdfSample* out = train.samples.data() + train.offsets[size_t(j)];
+            for (size_t s = 0; s < chunk.SampleCount(i); ++s) {
+              if (FoldOf(samples[s], folds) != f) *out++ = samples[s];
+            }
+          }
+        }, options.threads);
         const Status fitted = (*fitter)->Fit(train, options, &fold_fit);
         REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
         stats->kfold_refits += refit.size();

@@ -5,6 +5,7 @@
 #include <cstdio>
 
 #include "engine/fit/fitter.h"
+#include "engine/fit/fitter_base.h"
 #include "engine/fit/synthetic_samples.h"
 #include "tests/engine/fit/fit_test_util.h"
 
@@ -73,6 +74,49 @@ TEST(FitBackends, BatchedLanesMatchTheScalarFloatPath) {
     EXPECT_EQ(status_mismatch, 0) << LobeModelName(model);
     EXPECT_EQ(bad, 0) << LobeModelName(model) << ": of " << compared;
     EXPECT_GT(compared, 300) << LobeModelName(model);
+  }
+}
+
+// Every texel's problems are solved on their own in the lanes, so the batched fitter's results
+// may not depend on how a chunk is cut into tasks: small chunks on many workers are cut finer
+// (TexelsPerTask), and the k-fold refits rely on that to give the same choices on any machine.
+TEST(FitBackends, BatchedResultsDoNotDependOnTheWorkersOrTheTaskSize) {
+  EXPECT_EQ(internal::TexelsPerTask(1000000, 16), internal::kTexelsPerTask);
+  EXPECT_EQ(internal::TexelsPerTask(300, 1), 75);
+  EXPECT_EQ(internal::TexelsPerTask(300, 16), internal::kMinTexelsPerTask);
+  const auto truth = SynthMaterialTexels(300, kSeed + 7);
+  SyntheticSampleOptions so;
+  so.seed = kSeed + 7;
+  const TexelSampleChunk chunk = MakeSyntheticChunk(truth, so);
+  FitOptions options;
+  auto fit_with = [&](int workers) {
+    auto fitter = CreateFitter(Backend::kCpu, workers);
+    REFLCAP_CHECK(fitter.ok());
+    FitOptions o = options;
+    o.threads = workers;
+    return RunFitter(**fitter, chunk, o);
+  };
+  const std::vector<TexelFit> one = fit_with(1);  // 4 tasks of 75 texels
+  int lobes = 0;
+  for (const TexelFit& f : one) lobes += !f.lambert_only;
+  EXPECT_GT(lobes, 100);  // the lobe fits, whose LM runs longest, are compared too
+  for (int workers : {2, 16}) {  // tasks of 38 and of 16 texels
+    const std::vector<TexelFit> many = fit_with(workers);
+    ASSERT_EQ(many.size(), one.size());
+    int differing = 0;
+    for (size_t t = 0; t < one.size(); ++t) {
+      const auto a = one[t].params, b = many[t].params;
+      bool same = one[t].status == many[t].status && one[t].cost == many[t].cost &&
+                  one[t].iterations == many[t].iterations && a.rho_d == b.rho_d;
+      for (int k = 0; k < brdf::kMaxLobes; ++k) {
+        for (int c = 0; c < brdf::kChannels; ++c) {
+          same = same && a.lobes[k][c].cx == b.lobes[k][c].cx && a.lobes[k][c].cy == b.lobes[k][c].cy &&
+                 a.lobes[k][c].cz == b.lobes[k][c].cz && a.lobes[k][c].n == b.lobes[k][c].n;
+        }
+      }
+      differing += !same;
+    }
+    EXPECT_EQ(differing, 0) << workers << " workers";
   }
 }
 
