@@ -42,6 +42,14 @@ namespace {
 // (ParallelFor), so a per-file thread pool would only oversubscribe the cores.
 constexpr int kExrThreads = 0;
 
+// Grows OpenEXR's global thread pool to `threads` (never shrinks it), for a caller that reads or
+// writes one large file while nothing else runs.
+void GrowGlobalPool(int threads) {
+  static std::mutex pool_mutex;  // the pool is global: grown by one caller at a time
+  const std::lock_guard<std::mutex> lock(pool_mutex);
+  if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
+}
+
 // Largest finite half (0x7bff). half(x) rounds |x| >= 65520 to Inf, so values beyond this are
 // clamped before conversion.
 constexpr float kHalfMax = 65504.0f;
@@ -482,11 +490,13 @@ StatusOr<Image> ReadExrRgb(const fs::path& path) {
   });
 }
 
-StatusOr<Image> ReadExrChannels(const fs::path& path, std::vector<std::string>* channel_names) {
+StatusOr<Image> ReadExrChannels(const fs::path& path, std::vector<std::string>* channel_names,
+                                int threads) {
   REFLCAP_CHECK(channel_names != nullptr);
+  if (threads > 1) GrowGlobalPool(threads);
   std::vector<std::string> names;
   StatusOr<Image> image = GuardRead<Image>(path, [&]() -> StatusOr<Image> {
-    Imf::InputFile file(path.c_str(), kExrThreads);
+    Imf::InputFile file(path.c_str(), threads > 1 ? threads : kExrThreads);
     REFLCAP_ASSIGN_OR_RETURN(Imath::Box2i window, FullFrameWindow(path, file.header()));
     names = ChannelNames(file.header());
     if (names.empty()) return DataLossError(path.string(), ": file has no channels");
@@ -525,11 +535,7 @@ Status WriteExr(const fs::path& path, const Image& image, ExrPixelType type) {
 
 Status WriteExrChannels(const fs::path& path, const Image& image,
                         const std::vector<std::string>& names, ExrPixelType type, int threads) {
-  if (threads > 1) {
-    static std::mutex pool_mutex;  // the pool is global: grown by one caller at a time
-    const std::lock_guard<std::mutex> lock(pool_mutex);
-    if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
-  }
+  if (threads > 1) GrowGlobalPool(threads);
   return WriteExrImpl(path, image, names, type, threads);
 }
 

@@ -22,9 +22,11 @@ StatusOr<Image> ReadExrRgb(const std::filesystem::path& path);
 
 // Reads every channel, named, in the file's channel order (alphabetical, as OpenEXR stores them).
 // channel_names receives the names (only on success); the returned image has one channel per
-// name. Same window rules, errors and non-finite handling as ReadExrRgb.
+// name. Same window rules, errors and non-finite handling as ReadExrRgb. `threads` > 1 decodes on
+// that many threads of OpenEXR's global pool (as WriteExrChannels): for one large file read while
+// nothing else runs (a fit's maps); the pixels are the same.
 StatusOr<Image> ReadExrChannels(const std::filesystem::path& path,
-                                std::vector<std::string>* channel_names);
+                                std::vector<std::string>* channel_names, int threads = 0);
 
 // Header only: data window size and channel names (pixels are not decoded, windows not checked).
 StatusOr<ImageInfo> ReadExrInfo(const std::filesystem::path& path);

@@ -3,6 +3,7 @@
 
 #include <map>
 
+#include "engine/core/parallel.h"
 #include "engine/image/exr_io.h"
 
 namespace reflcap {
@@ -82,12 +83,15 @@ StatusOr<BrdfMaps> BrdfMapsFromImage(const Image& image, const std::vector<std::
   }
   const std::vector<Slot> slots = Slots(maps.num_lobes);
   maps.texels.assign(atlas.TexelCount(), brdf::BrdfParams{});
-  for (size_t t = 0; t < maps.texels.size(); ++t) {
-    brdf::BrdfParams& p = maps.texels[t];
-    p.num_lobes = maps.num_lobes;
-    const float* px = &image.data[size_t(atlas.pixel_of_texel[t]) * image.channels];
-    for (size_t i = 0; i < slots.size(); ++i) SlotRef(p, slots[i]) = px[source[i]];
-  }
+  constexpr int64_t kTexelsPerTask = 1 << 14;  // a million-texel atlas: ~60 tasks
+  ParallelFor(0, int64_t(maps.texels.size()), kTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+    for (int64_t t = begin; t < end; ++t) {
+      brdf::BrdfParams& p = maps.texels[size_t(t)];
+      p.num_lobes = maps.num_lobes;
+      const float* px = &image.data[size_t(atlas.pixel_of_texel[size_t(t)]) * image.channels];
+      for (size_t i = 0; i < slots.size(); ++i) SlotRef(p, slots[i]) = px[source[i]];
+    }
+  });
   return maps;
 }
 
@@ -99,7 +103,8 @@ Status WriteBrdfMaps(const std::filesystem::path& path, const BrdfMaps& maps,
 
 StatusOr<BrdfMaps> ReadBrdfMaps(const std::filesystem::path& path, const TexelAtlas& atlas) {
   std::vector<std::string> names;
-  REFLCAP_ASSIGN_OR_RETURN(Image image, ReadExrChannels(path, &names));
+  // One large file, read before anything else runs: decoded on every core.
+  REFLCAP_ASSIGN_OR_RETURN(Image image, ReadExrChannels(path, &names, HardwareThreads()));
   return BrdfMapsFromImage(image, names, atlas, path.string());
 }
 

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/core/atomic_file.h"
+#include "engine/core/parallel.h"
 #include "engine/image/exr_io.h"
 #include "engine/image/png_io.h"
 #include "engine/mesh/mesh_io.h"
@@ -27,10 +28,9 @@ std::string NameOf(const std::vector<std::string>& names, int code) {
 }
 
 // The texel at each query's pixel centre in `atlas` (mesh: the renderers' ray and UV rule).
-StatusOr<std::vector<int64_t>> MeshTexels(const Capture& capture, const TexelAtlas& atlas,
-                                          const TriangleMesh& mesh,
-                                          const std::vector<PixelQuery>& queries) {
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<RayScene> scene, RayScene::Create(mesh));
+std::vector<int64_t> MeshTexels(const Capture& capture, const TexelAtlas& atlas,
+                                const TriangleMesh& mesh, const RayScene& scene,
+                                const std::vector<PixelQuery>& queries) {
   std::vector<int64_t> texels;
   for (const PixelQuery& q : queries) {
     const CaptureImage& image = capture.images[q.image];
@@ -41,7 +41,7 @@ StatusOr<std::vector<int64_t>> MeshTexels(const Capture& capture, const TexelAtl
     camera.PixelRay({double(q.x), double(q.y)}, &o, &d);
     const Vec3f origin = (object_from_cam * o).cast<float>();
     const Vec3f dir = (object_from_cam.rotation * d).normalized().cast<float>();
-    const RayHit hit = scene->Intersect(origin, dir, 0, std::numeric_limits<float>::infinity());
+    const RayHit hit = scene.Intersect(origin, dir, 0, std::numeric_limits<float>::infinity());
     if (!hit.hit) {
       texels.push_back(-1);
       continue;
@@ -77,43 +77,75 @@ std::vector<std::string> FitReportNames(const nlohmann::json& report, const char
   return names;
 }
 
-StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, const fs::path& fit_dir,
-                                                    const fs::path& samples_dir,
-                                                    const std::vector<PixelQuery>& queries) {
-  const fs::path params = fit_dir / "params.exr";
-  REFLCAP_ASSIGN_OR_RETURN(ImageInfo params_info, ReadExrInfo(params));
-  TexelAtlas atlas;
-  std::vector<int64_t> texels;
+StatusOr<std::unique_ptr<FitTexels>> FitTexels::Load(const Capture& capture,
+                                                     const fs::path& fit_dir,
+                                                     const fs::path& samples_dir) {
+  auto f = std::unique_ptr<FitTexels>(new FitTexels());
+  f->capture_ = &capture;
+  f->params_ = fit_dir / "params.exr";
+  f->samples_dir_ = samples_dir;
+  REFLCAP_ASSIGN_OR_RETURN(ImageInfo params_info, ReadExrInfo(f->params_));
   if (capture.normal_map) {
     // The atlas is the camera's masked pixels (BuildNormalMapAtlas): the pixel is the texel.
     const NormalMapGeometry& g = *capture.normal_map;
     REFLCAP_ASSIGN_OR_RETURN(Image normals, ReadExrRgb(capture.Resolve(g.normals)));
     REFLCAP_ASSIGN_OR_RETURN(Image mask, ReadPng(capture.Resolve(g.mask)));
-    REFLCAP_ASSIGN_OR_RETURN(atlas, BuildNormalMapAtlas(normals, mask));
+    REFLCAP_ASSIGN_OR_RETURN(f->atlas_, BuildNormalMapAtlas(normals, mask));
+  } else {
+    REFLCAP_ASSIGN_OR_RETURN(f->mesh_, LoadMesh(capture.Resolve(capture.mesh)));
+    auto built = BuildTexelAtlas(f->mesh_, params_info.width, params_info.height);
+    if (!built.ok()) return built.status().WithContext(f->params_.string());
+    f->atlas_ = std::move(built).value();
+    REFLCAP_ASSIGN_OR_RETURN(f->scene_, RayScene::Create(f->mesh_));
+  }
+  // status.exr: one large file, decoded on every core (channels are stored sorted by name).
+  const fs::path status = fit_dir / "status.exr";
+  REFLCAP_ASSIGN_OR_RETURN(f->status_, ReadExrChannels(status, &f->status_channels_,
+                                                       HardwareThreads()));
+  if (f->status_.width != f->atlas_.width || f->status_.height != f->atlas_.height) {
+    return InvalidArgumentError(status.string(), ": is ", f->status_.width, "x",
+                                f->status_.height, " but the atlas of ", f->params_.string(),
+                                " is ", f->atlas_.width, "x", f->atlas_.height);
+  }
+  if (auto text = ReadTextFile(fit_dir / "fit_report.json"); text.ok()) {
+    nlohmann::json report = nlohmann::json::parse(*text, nullptr, false);
+    if (report.is_object()) {
+      f->status_names_ = FitReportNames(report, "status_names");
+      f->model_names_ = FitReportNames(report, "model_names");
+    }
+  }
+  if (!samples_dir.empty()) {
+    REFLCAP_ASSIGN_OR_RETURN(f->store_, SampleStoreReader::Open(samples_dir));
+    const SampleStoreInfo& info = f->store_->info();
+    if (info.texels != f->atlas_.TexelCount()) {
+      return InvalidArgumentError(samples_dir.string(), ": the store has ", info.texels,
+                                  " texels but the atlas of ", f->params_.string(), " has ",
+                                  f->atlas_.TexelCount(), ": not the fit's store");
+    }
+  }
+  return f;
+}
+
+FitTexels::~FitTexels() = default;
+
+StatusOr<std::vector<PixelTexel>> FitTexels::LookUp(const std::vector<PixelQuery>& queries) {
+  const Capture& capture = *capture_;
+  std::vector<int64_t> texels;
+  if (capture.normal_map) {
+    const NormalMapGeometry& g = *capture.normal_map;
     for (const PixelQuery& q : queries) {
       const bool inside = capture.images[q.image].camera == g.camera && q.x >= 0 && q.y >= 0 &&
-                          q.x < atlas.width && q.y < atlas.height;
-      texels.push_back(inside ? atlas.TexelAt(q.x, q.y) : -1);
+                          q.x < atlas_.width && q.y < atlas_.height;
+      texels.push_back(inside ? atlas_.TexelAt(q.x, q.y) : -1);
     }
   } else {
-    REFLCAP_ASSIGN_OR_RETURN(TriangleMesh mesh, LoadMesh(capture.Resolve(capture.mesh)));
-    auto built = BuildTexelAtlas(mesh, params_info.width, params_info.height);
-    if (!built.ok()) return built.status().WithContext(params.string());
-    atlas = std::move(built).value();
-    REFLCAP_ASSIGN_OR_RETURN(texels, MeshTexels(capture, atlas, mesh, queries));
+    texels = MeshTexels(capture, atlas_, mesh_, *scene_, queries);
   }
   std::vector<PixelTexel> out(queries.size());
   for (size_t i = 0; i < queries.size(); ++i) out[i].texel = texels[i];
 
-  // status.exr's channels at each texel's atlas pixel (channels are stored sorted by name).
-  const fs::path status = fit_dir / "status.exr";
-  std::vector<std::string> names;
-  REFLCAP_ASSIGN_OR_RETURN(Image codes, ReadExrChannels(status, &names));
-  if (codes.width != atlas.width || codes.height != atlas.height) {
-    return InvalidArgumentError(status.string(), ": is ", codes.width, "x", codes.height,
-                                " but the atlas of ", params.string(), " is ", atlas.width, "x",
-                                atlas.height);
-  }
+  // status.exr's channels at each texel's atlas pixel.
+  const std::vector<std::string>& names = status_channels_;
   const auto channel = [&](const char* name) {
     for (size_t k = 0; k < names.size(); ++k) {
       if (names[k] == name) return int(k);
@@ -124,16 +156,10 @@ StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, cons
   if (status_channel < 0 && names.size() == 1) status_channel = 0;  // an older fit's single "Y"
   const int model_channel = channel("model"), cluster_channel = channel("material_cluster"),
             donor_channel = channel("lobe_donor");
-  nlohmann::json report;
-  if (auto text = ReadTextFile(fit_dir / "fit_report.json"); text.ok()) {
-    report = nlohmann::json::parse(*text, nullptr, false);
-    if (!report.is_object()) report = nlohmann::json::object();
-  }
-  const std::vector<std::string> status_names = FitReportNames(report, "status_names");
-  const std::vector<std::string> model_names = FitReportNames(report, "model_names");
   for (PixelTexel& p : out) {
     if (p.texel < 0) continue;
-    const float* px = &codes.data[size_t(atlas.pixel_of_texel[size_t(p.texel)]) * codes.channels];
+    const float* px =
+        &status_.data[size_t(atlas_.pixel_of_texel[size_t(p.texel)]) * status_.channels];
     // Codes are small integers stored as floats; a non-finite one reads as absent.
     const auto code = [&](int c) {
       return c >= 0 && std::isfinite(px[c]) ? int(std::lround(px[c])) : -1;
@@ -142,26 +168,19 @@ StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, cons
     p.model = code(model_channel);
     p.cluster = code(cluster_channel);
     if (donor_channel >= 0) p.lobe_donor = px[donor_channel];
-    p.status_name = NameOf(status_names, p.status);
-    p.model_name = NameOf(model_names, p.model);
+    p.status_name = NameOf(status_names_, p.status);
+    p.model_name = NameOf(model_names_, p.model);
   }
 
-  if (samples_dir.empty()) return out;
-  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<SampleStoreReader> store,
-                           SampleStoreReader::Open(samples_dir));
-  const SampleStoreInfo& info = store->info();
-  if (info.texels != atlas.TexelCount()) {
-    return InvalidArgumentError(samples_dir.string(), ": the store has ", info.texels,
-                                " texels but the atlas of ", params.string(), " has ",
-                                atlas.TexelCount(), ": not the fit's store");
-  }
+  if (store_ == nullptr) return out;
+  const SampleStoreInfo& info = store_->info();
   std::map<uint32_t, TexelSampleChunk> chunks;  // each needed chunk read once
   for (PixelTexel& p : out) {
     if (p.texel < 0) continue;
     const uint32_t c = uint32_t(uint64_t(p.texel) / info.chunk_texels);
     auto it = chunks.find(c);
     if (it == chunks.end()) {
-      REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk chunk, store->ReadChunk(c));
+      REFLCAP_ASSIGN_OR_RETURN(TexelSampleChunk chunk, store_->ReadChunk(c));
       it = chunks.emplace(c, std::move(chunk)).first;
     }
     const TexelSampleChunk& chunk = it->second;
@@ -178,6 +197,14 @@ StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, cons
     }
   }
   return out;
+}
+
+StatusOr<std::vector<PixelTexel>> LookUpPixelTexels(const Capture& capture, const fs::path& fit_dir,
+                                                    const fs::path& samples_dir,
+                                                    const std::vector<PixelQuery>& queries) {
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<FitTexels> fit,
+                           FitTexels::Load(capture, fit_dir, samples_dir));
+  return fit->LookUp(queries);
 }
 
 }  // namespace reflcap::validate

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,11 @@
 
 #include "engine/capture/capture.h"
 #include "engine/core/status.h"
+#include "engine/image/image.h"
+#include "engine/mesh/mesh.h"
+#include "engine/mesh/ray_scene.h"
+#include "engine/mesh/texel_atlas.h"
+#include "engine/texel/sample_store.h"
 
 namespace reflcap::validate {
 
@@ -41,6 +47,34 @@ struct PixelTexel {
   // value among them with a positive finite weight (0 when none).
   int64_t train_samples = -1;
   std::array<float, 3> brightest{};
+};
+
+// What the look-up reads from the fit, loaded once: the atlas of FIT/params.exr (with the mesh
+// and its ray scene), FIT/status.exr, fit_report.json's names and the sample store. Load can run
+// while `reflcap validate` scores the images (it needs no query); the status map it read serves
+// the report's fit figures too. Errors as LookUpPixelTexels.
+class FitTexels {
+ public:
+  static StatusOr<std::unique_ptr<FitTexels>> Load(const Capture& capture,
+                                                   const std::filesystem::path& fit_dir,
+                                                   const std::filesystem::path& samples_dir);
+  ~FitTexels();
+  // LookUpPixelTexels's answer for `queries` (reads the store chunks they need).
+  StatusOr<std::vector<PixelTexel>> LookUp(const std::vector<PixelQuery>& queries);
+  // FIT/status.exr as read: one channel per name of status_channels().
+  const Image& status() const { return status_; }
+  const std::vector<std::string>& status_channels() const { return status_channels_; }
+
+ private:
+  FitTexels() = default;
+  const Capture* capture_ = nullptr;
+  std::filesystem::path params_, samples_dir_;
+  TriangleMesh mesh_;
+  TexelAtlas atlas_;
+  std::unique_ptr<RayScene> scene_;
+  Image status_;
+  std::vector<std::string> status_channels_, status_names_, model_names_;
+  std::unique_ptr<SampleStoreReader> store_;
 };
 
 // For every query, the texel its pixel centre shows in the atlas of FIT/params.exr, found as

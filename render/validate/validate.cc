@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <future>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -431,6 +432,14 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
                                         const fs::path& out_dir, const ValidateOptions& options) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   const auto start = std::chrono::steady_clock::now();
+  // With the fit: what the worst pixels' texels are looked up in (mesh, atlas, status.exr, the
+  // store) loads while the images are scored; its status map serves the fit figures too.
+  std::future<StatusOr<std::unique_ptr<FitTexels>>> fit_texels;
+  if (!options.fit_dir.empty()) {
+    fit_texels = std::async(std::launch::async, [&capture, &options] {
+      return FitTexels::Load(capture, options.fit_dir, options.samples_dir);
+    });
+  }
   std::vector<Entry> entries;
   for (size_t i = 0; i < capture.images.size(); ++i) {
     const CaptureImage& image = capture.images[i];
@@ -605,12 +614,16 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   // With the fit: the texel each worst pixel shows, its model, and its train samples.
   std::vector<PixelTexel> worst_texels;
   std::string worst_texels_note;
+  StatusOr<std::unique_ptr<FitTexels>> loaded_fit = UnavailableError("no fit folder given");
+  if (fit_texels.valid()) loaded_fit = fit_texels.get();
   if (!options.fit_dir.empty() && !worst_pixels.empty()) {
     std::vector<PixelQuery> queries;
     for (const ListedPixel& w : worst_pixels) {
       queries.push_back({entries[w.entry].index, w.pixel.x, w.pixel.y});
     }
-    auto looked_up = LookUpPixelTexels(capture, options.fit_dir, options.samples_dir, queries);
+    StatusOr<std::vector<PixelTexel>> looked_up =
+        loaded_fit.ok() ? (*loaded_fit)->LookUp(queries)
+                        : StatusOr<std::vector<PixelTexel>>(loaded_fit.status());
     if (looked_up.ok()) {
       worst_texels = std::move(looked_up).value();
     } else {
@@ -754,8 +767,15 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       fit_fields_html +=
           "<p class=note>No fit summary: " + HtmlEscape(report.string()) + " is absent.</p>\n";
     }
+    // status.exr as the worst-pixel look-up read it, else read here.
     std::vector<std::string> channel_names;
-    auto codes = ReadExrChannels(status, &channel_names);
+    StatusOr<Image> codes = UnavailableError("not read");
+    if (loaded_fit.ok()) {
+      codes = (*loaded_fit)->status();
+      channel_names = (*loaded_fit)->status_channels();
+    } else {
+      codes = ReadExrChannels(status, &channel_names, HardwareThreads());  // one large file
+    }
     if (codes.ok()) {
       // One categorical map per channel the fit wrote: its status, the model each texel ended
       // with, and its material cluster (older FIT folders lack the last two: skipped).
