@@ -170,9 +170,17 @@ void AddIndirectLight(const FittedCapture& fitted, const IndirectLight& indirect
                    image.exposure_s, supersampling, radiance, pixels);
 }
 
+namespace {
+// `render`, or the CPU reference renderer when it is empty.
+StatusOr<RenderResult> RenderEvidence(const FittedCapture& fitted, const EvidenceRender& render,
+                                      size_t index, const RenderOptions& options) {
+  return render ? render(index, options) : RenderCaptureImage(fitted, index, options);
+}
+}  // namespace
+
 IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
                                          const IndirectLight& indirect, int bounces,
-                                         bool cast_shadows) {
+                                         bool cast_shadows, const EvidenceRender& render) {
   const Capture& capture = *fitted.capture;
   REFLCAP_CHECK(!fitted.normal_map && fitted.scene != nullptr);
   IndirectEvidence evidence;
@@ -183,7 +191,7 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   for (const size_t index : EvidenceImages(capture, kIndirectEvidenceImages)) {
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
-    StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);
+    StatusOr<RenderResult> rendered = RenderEvidence(fitted, render, index, direct);
     StatusOr<Image> read = ReadEvidencePhotograph(capture, index, rendered.status(),
                                                   "interreflection evidence");
     if (!read.ok()) {
@@ -228,7 +236,8 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   return evidence;
 }
 
-PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadows) {
+PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadows,
+                                   const EvidenceRender& render) {
   const Capture& capture = *fitted.capture;
   REFLCAP_CHECK(!fitted.normal_map && fitted.scene != nullptr);
   PixelEvidence evidence;
@@ -238,9 +247,9 @@ PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadow
   for (const size_t index : EvidenceImages(capture, kPixelEvidenceImages)) {
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
-    StatusOr<RenderResult> at_centre = RenderCaptureImage(fitted, index, point);
+    StatusOr<RenderResult> at_centre = RenderEvidence(fitted, render, index, point);
     StatusOr<RenderResult> averaged =
-        at_centre.ok() ? RenderCaptureImage(fitted, index, box) : at_centre.status();
+        at_centre.ok() ? RenderEvidence(fitted, render, index, box) : at_centre.status();
     StatusOr<Image> read =
         ReadEvidencePhotograph(capture, index, averaged.status(), "pixel-model evidence");
     if (!read.ok()) {
@@ -436,6 +445,8 @@ Status CaptureRenderOptions::Validate() const {
 // render_report.json `indirect`.
 StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCapture& fitted,
                                                               const CaptureRenderOptions& options,
+                                                              const EvidenceRender& render,
+                                                              const std::string& renderer,
                                                               Json* report) {
   *report = {{"mode", IndirectModeName(options.indirect)}, {"used", false}};
   REFLCAP_CHECK(!fitted.normal_map) << "normal-map captures: PrepareStrayLight";
@@ -446,9 +457,10 @@ StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCaptur
         IndirectLight coarse,
         IndirectLight::Build(*fitted.scene, fitted.atlas,
                              std::min(options.indirect_rays, kIndirectEvidenceRays)));
-    const IndirectEvidence evidence =
-        MeasureIndirectEvidence(fitted, coarse, options.indirect_bounces, options.cast_shadows);
+    const IndirectEvidence evidence = MeasureIndirectEvidence(
+        fitted, coarse, options.indirect_bounces, options.cast_shadows, render);
     (*report)["evidence"] = {{"images", evidence.images},
+                             {"renderer", renderer},
                              {"pixels", evidence.pixels},
                              {"skipped_images", evidence.skipped},
                              {"scale", evidence.scale},
@@ -643,6 +655,25 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   if (fitted->height_field != nullptr) {
     REFLCAP_RETURN_IF_ERROR(ChooseHeightField(options, fitted.get(), &height_report));
   }
+  // The evidence for the auto settings: rendered by the backend when it renders it (a GPU; it
+  // is prepared first), else by the CPU reference renderer.
+  EvidenceRender evidence_render;
+  std::string evidence_renderer = "cpu";
+  const bool backend_evidence = backend.renders_evidence && (backend.render || backend.render_many);
+  if (backend_evidence) {
+    if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
+    evidence_renderer = backend.backend;
+    const FittedCapture& f = *fitted;
+    evidence_render = [&backend, &f](size_t index, const RenderOptions& o) -> StatusOr<RenderResult> {
+      if (backend.render) return backend.render(f, index, o);
+      StatusOr<RenderResult> out = InternalError("render_many delivered no image");
+      REFLCAP_RETURN_IF_ERROR(backend.render_many(f, {index}, o, [&](size_t, RenderResult&& r) {
+        out = std::move(r);
+        return OkStatus();
+      }));
+      return out;
+    };
+  }
   // The pixel model: fixed, or (auto) what the train photographs show.
   Json pixel_report = {{"mode", options.supersampling == kAutoSupersampling ? "auto" : "fixed"}};
   if (fitted->normal_map) {
@@ -651,9 +682,11 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
                           "photographs' point spread (psf)";
   } else if (options.supersampling == kAutoSupersampling) {
     const auto pixel_start = std::chrono::steady_clock::now();
-    const PixelEvidence evidence = MeasurePixelEvidence(*fitted, options.cast_shadows);
+    const PixelEvidence evidence =
+        MeasurePixelEvidence(*fitted, options.cast_shadows, evidence_render);
     render_options.supersampling = evidence.box ? kAutoBoxSupersampling : 1;
     pixel_report["evidence"] = {{"images", evidence.images},
+                                {"renderer", evidence_renderer},
                                 {"skipped_images", evidence.skipped},
                                 {"pixels", evidence.pixels},
                                 {"error_point", evidence.error_point},
@@ -677,7 +710,8 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   if (fitted->normal_map) {
     stray = PrepareStrayLight(*fitted, options, &indirect_report);
   } else {
-    REFLCAP_ASSIGN_OR_RETURN(indirect, PrepareIndirectLight(*fitted, options, &indirect_report));
+    REFLCAP_ASSIGN_OR_RETURN(indirect, PrepareIndirectLight(*fitted, options, evidence_render,
+                                                            evidence_renderer, &indirect_report));
   }
   // Normal-map captures: the photographs' point spread (after the stray light, which the
   // evidence renders include).
@@ -688,7 +722,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
     pixel_report["psf"] = psf;
   }
   summary.num_lobes = fitted->maps.num_lobes;
-  if (backend.prepare) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
+  if (backend.prepare && !backend_evidence) REFLCAP_RETURN_IF_ERROR(backend.prepare(*fitted));
   // Every output folder exists before the writers start (they run concurrently).
   std::set<fs::path> folders;
   for (size_t index : selected) {

@@ -71,6 +71,10 @@ CaptureRenderBackend VulkanCaptureRenderBackend(VulkanRenderer& renderer) {
       " shadow texels per image pixel, at least ", o.min_shadow_resolution,
       " per side), exact distorted rays through a visibility image, no "
       "interreflection");
+  // A GPU renders the auto settings' evidence too; lavapipe leaves it to the CPU reference
+  // renderer, ~3x faster on the same cores (bench/RESULTS.md: `reflcap render` medium preset,
+  // 19.7 s on the CPU backend against 58.1 s on lavapipe).
+  b.renders_evidence = !renderer.device().IsSoftware();
   b.prepare = [&renderer](const FittedCapture& fitted) { return SetFittedScene(renderer, fitted); };
   b.render = [&renderer](const FittedCapture& fitted, size_t index, const RenderOptions& options) {
     return RenderCaptureImageVulkan(renderer, fitted, index, options);

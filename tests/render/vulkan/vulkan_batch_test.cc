@@ -4,8 +4,9 @@
 // distorted and orthographic cameras, point lights inside and outside the object's bounds and
 // directional lights, turntable poses, supersampling, kept shadow maps redrawn while images of
 // the same batch still sample them, pass targets released mid-stream — and normal-map scenes;
-// errors found before anything renders (naming the image) or raised by the caller's sink; and
-// `reflcap render`'s capture path refusing a bad camera before writing any file.
+// errors found before anything renders (naming the image) or raised by the caller's sink;
+// `reflcap render`'s capture path refusing a bad camera before writing any file; and the auto
+// settings' evidence rendered on the device deciding as the CPU reference's.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -16,8 +17,13 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "acquire/synth/synth.h"
+#include "engine/core/atomic_file.h"
+#include "engine/image/exr_io.h"
 #include "engine/mesh/ray_scene.h"
+#include "render/reference/indirect_light.h"
 #include "render/reference/render_capture.h"
 #include "render/vulkan/vulkan_render_capture.h"
 #include "render/vulkan/vulkan_renderer.h"
@@ -499,6 +505,104 @@ TEST_F(VulkanBatch, CaptureWithABadCameraWritesNoFileAndNamesTheImage) {
     }
   }
   EXPECT_EQ(files, 0u) << "every image is checked before the first renders";
+}
+
+// The interreflection gather table of a fitted capture (16 rays per texel, as the tests of
+// render_capture use).
+std::unique_ptr<IndirectLight> table_of(const FittedCapture& fitted) {
+  auto table = IndirectLight::Build(*fitted.scene, fitted.atlas, 16);
+  REFLCAP_CHECK(table.ok()) << table.status().ToString();
+  return std::make_unique<IndirectLight>(std::move(table).value());
+}
+
+// The auto settings' evidence (pixel model, interreflection) rendered on the device — a GPU's
+// default (CaptureRenderBackend::renders_evidence), forced here on lavapipe — decides as the CPU
+// reference renderer's: on photographs taken at the pixel centre, averaged over the pixel, and
+// taken at the centre with interreflection. The two renderers differ at shadow edges (shadow
+// maps against rays), so the sums differ slightly.
+TEST_F(VulkanBatch, EvidenceRenderedOnTheDeviceDecidesAsTheCpus) {
+  // |reduction(device) - reduction(cpu)| relative to max(1, |reduction(cpu)|): measured 1.9e-3
+  // (point-sampled photographs, -296.35 against -295.79), 0 to 1e-5 otherwise (the decision
+  // margins are 0.02 for the pixel model, 0.25 for interreflection).
+  constexpr double kReductionAgreement = 0.01;
+  const auto agree = [](double device, double cpu) {
+    return std::abs(device - cpu) <= kReductionAgreement * std::max(1.0, std::abs(cpu));
+  };
+  reflcap::testing::ScratchDir dir;
+  struct Case {
+    int photo_supersampling;
+    bool interreflection;
+  };
+  for (const Case c : {Case{1, false}, Case{3, false}, Case{1, true}}) {
+    const std::string name = StrCat("capture_", c.photo_supersampling, c.interreflection ? "_indirect" : "");
+    SCOPED_TRACE(name);
+    const fs::path cap_dir = dir / name;
+    synth::SynthOptions o;
+    o.noise = 0.01;
+    o.texels = 4000;
+    o.image_size = 64;
+    o.cameras = 2;
+    o.lights = 2;
+    o.steps = 4;
+    o.supersampling = c.photo_supersampling;
+    ASSERT_TRUE(synth::WriteSyntheticCapture(o, cap_dir).ok());
+    auto capture = ReadCapture(cap_dir);
+    ASSERT_TRUE(capture.ok());
+    const fs::path gt = cap_dir / "gt/params.exr";
+    if (c.interreflection) {
+      // Every photograph rendered with interreflection (CPU) and written over it.
+      CaptureRenderOptions on;
+      on.split = SplitSelection::kAll;
+      on.indirect = IndirectMode::kOn;
+      on.indirect_rays = 16;
+      on.supersampling = 1;
+      ASSERT_TRUE(RenderCapture(*capture, gt, cap_dir / "with_indirect", on).ok());
+      for (const CaptureImage& image : capture->images) {
+        auto lit = ReadExrRgb(cap_dir / "with_indirect" / RenderPathFor(image.file));
+        ASSERT_TRUE(lit.ok());
+        ASSERT_TRUE(WriteExr(capture->Resolve(image.file), *lit, ExrPixelType::kFloat).ok());
+      }
+    }
+    auto fitted = LoadFittedCapture(*capture, gt);
+    ASSERT_TRUE(fitted.ok()) << fitted.status().ToString();
+    ASSERT_TRUE(SetFittedScene(renderer(), **fitted).ok());
+    const EvidenceRender on_device = [&](size_t index, const RenderOptions& options) {
+      return RenderCaptureImageVulkan(renderer(), **fitted, index, options);
+    };
+    const PixelEvidence cpu = MeasurePixelEvidence(**fitted, true);
+    const PixelEvidence gpu = MeasurePixelEvidence(**fitted, true, on_device);
+    const IndirectEvidence icpu = MeasureIndirectEvidence(**fitted, *table_of(**fitted), 2, true);
+    const IndirectEvidence igpu =
+        MeasureIndirectEvidence(**fitted, *table_of(**fitted), 2, true, on_device);
+    std::printf("%s: pixel-model reduction cpu %.5f, device %.5f; interreflection: %zu / %zu "
+                "unlit pixels, error reduction cpu %.5f, device %.5f\n",
+                name.c_str(), cpu.reduction, gpu.reduction, icpu.pixels, igpu.pixels,
+                icpu.error_reduction, igpu.error_reduction);
+    EXPECT_EQ(gpu.images, cpu.images);
+    EXPECT_EQ(gpu.pixels, cpu.pixels);
+    EXPECT_EQ(cpu.box, c.photo_supersampling > 1);  // the cases have teeth
+    EXPECT_EQ(gpu.box, cpu.box);
+    // With interreflection the photographs are the CPU renderer's own noise-free output: its
+    // point error is the indirect light alone, the device's adds its shadow-edge differences, and
+    // the ratio (-1.2e4 against -1.1e4) says only "not a box" on both.
+    if (!c.interreflection) EXPECT_TRUE(agree(gpu.reduction, cpu.reduction));
+    EXPECT_EQ(icpu.shows, c.interreflection);
+    EXPECT_EQ(igpu.shows, icpu.shows);
+    EXPECT_TRUE(agree(igpu.error_reduction, icpu.error_reduction));
+
+    // Through RenderCapture: a backend that renders the evidence says so, and decides the same.
+    CaptureRenderBackend backend = VulkanCaptureRenderBackend(renderer());
+    backend.renders_evidence = true;
+    CaptureRenderOptions automatic;
+    automatic.indirect_rays = 16;
+    const fs::path out = cap_dir / "auto_on_device";
+    ASSERT_TRUE(RenderCapture(*capture, gt, out, automatic, backend).ok());
+    const auto report = nlohmann::json::parse(ReadTextFile(out / "render_report.json").value());
+    EXPECT_EQ(report["pixel_model"]["evidence"]["renderer"], "vulkan");
+    EXPECT_EQ(report["indirect"]["evidence"]["renderer"], "vulkan");
+    EXPECT_EQ(report["supersampling"], cpu.box ? kAutoBoxSupersampling : 1);
+    EXPECT_EQ(report["indirect"]["used"], icpu.shows);
+  }
 }
 
 }  // namespace
