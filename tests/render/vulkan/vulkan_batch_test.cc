@@ -468,16 +468,21 @@ TEST(VulkanBatchOptions, ValidateNamesTheField) {
   EXPECT_TRUE(VulkanRenderOptions{}.Validate().ok());
 }
 
-TEST_F(VulkanBatch, CaptureWithABadCameraWritesNoFileAndNamesTheImage) {
-  reflcap::testing::ScratchDir dir;
+// A small synthetic capture: 2 cameras, 2 lights, 4 turntable steps.
+synth::SynthOptions SmallCapture(double noise, int texels, int image_size) {
   synth::SynthOptions o;
-  o.noise = 0;
-  o.texels = 2000;
-  o.image_size = 40;
+  o.noise = noise;
+  o.texels = texels;
+  o.image_size = image_size;
   o.cameras = 2;
   o.lights = 2;
   o.steps = 4;
-  ASSERT_TRUE(synth::WriteSyntheticCapture(o, dir / "capture").ok());
+  return o;
+}
+
+TEST_F(VulkanBatch, CaptureWithABadCameraWritesNoFileAndNamesTheImage) {
+  reflcap::testing::ScratchDir dir;
+  ASSERT_TRUE(synth::WriteSyntheticCapture(SmallCapture(0, 2000, 40), dir / "capture").ok());
   auto capture = ReadCapture(dir / "capture");
   ASSERT_TRUE(capture.ok()) << capture.status().ToString();
   // Camera 1 becomes orthographic without a pixel size: its images cannot render.
@@ -534,16 +539,11 @@ TEST_F(VulkanBatch, EvidenceRenderedOnTheDeviceDecidesAsTheCpus) {
     bool interreflection;
   };
   for (const Case c : {Case{1, false}, Case{3, false}, Case{1, true}}) {
-    const std::string name = StrCat("capture_", c.photo_supersampling, c.interreflection ? "_indirect" : "");
+    const std::string name =
+        StrCat("capture_", c.photo_supersampling, c.interreflection ? "_indirect" : "");
     SCOPED_TRACE(name);
     const fs::path cap_dir = dir / name;
-    synth::SynthOptions o;
-    o.noise = 0.01;
-    o.texels = 4000;
-    o.image_size = 64;
-    o.cameras = 2;
-    o.lights = 2;
-    o.steps = 4;
+    synth::SynthOptions o = SmallCapture(0.01, 4000, 64);
     o.supersampling = c.photo_supersampling;
     ASSERT_TRUE(synth::WriteSyntheticCapture(o, cap_dir).ok());
     auto capture = ReadCapture(cap_dir);
