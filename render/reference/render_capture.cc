@@ -180,14 +180,20 @@ StatusOr<RenderResult> RenderEvidence(const FittedCapture& fitted, const Evidenc
 
 IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
                                          const IndirectLight& indirect, int bounces,
-                                         bool cast_shadows, const EvidenceRender& render) {
+                                         bool cast_shadows, int supersampling,
+                                         const EvidenceRender& render) {
   const Capture& capture = *fitted.capture;
   REFLCAP_CHECK(!fitted.normal_map && fitted.scene != nullptr);
   IndirectEvidence evidence;
   double pq = 0, qq = 0, pp = 0;
+  // Photographs that integrate over their pixels: the direct light and the prediction averaged
+  // over each pixel too (2 x 2, as the pixel-model evidence), so that a pixel with lit surface
+  // anywhere in it is not taken for unlit.
+  const bool box = supersampling > 1;
   RenderOptions direct;
   direct.cast_shadows = cast_shadows;
   direct.aux_buffers = true;
+  direct.supersampling = box ? kPixelEvidenceSupersampling : 1;
   for (const size_t index : EvidenceImages(capture, kIndirectEvidenceImages)) {
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
@@ -201,12 +207,20 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
     const RenderResult& lit = *rendered;
     const Image& photo = *read;
     Image predicted(camera.width, camera.height, 3, 0.0f);
-    AddIndirectLight(fitted, indirect, index, bounces, cast_shadows, 1, &predicted);
+    AddIndirectLight(fitted, indirect, index, bounces, cast_shadows, direct.supersampling,
+                     &predicted);
     // A pixel whose 3x3 neighbourhood is object without direct light: away from silhouettes and
     // shadow edges, where the photograph's pixel filter mixes in lit surface or background.
+    // Point pixels: the centre faces away from the light or is cast-shadowed (aux); box pixels:
+    // no direct light reaches any of the pixel's samples (its averaged direct render is 0).
     auto unlit = [&](int x, int y) {
       const float* a = lit.aux.pixel(x, y);
-      return a[kAuxMask] > 0.5f && (a[kAuxCosThetaI] <= 0 || a[kAuxCastShadow] > 0.5f);
+      if (!(a[kAuxMask] > 0.5f)) return false;
+      if (box) {
+        const float* d = lit.pixels.pixel(x, y);
+        return d[0] == 0 && d[1] == 0 && d[2] == 0;
+      }
+      return a[kAuxCosThetaI] <= 0 || a[kAuxCastShadow] > 0.5f;
     };
     for (int y = 1; y + 1 < camera.height; ++y) {
       for (int x = 1; x + 1 < camera.width; ++x) {
@@ -445,6 +459,7 @@ Status CaptureRenderOptions::Validate() const {
 // render_report.json `indirect`.
 StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCapture& fitted,
                                                               const CaptureRenderOptions& options,
+                                                              int supersampling,
                                                               const EvidenceRender& render,
                                                               const std::string& renderer,
                                                               Json* report) {
@@ -457,8 +472,9 @@ StatusOr<std::unique_ptr<IndirectLight>> PrepareIndirectLight(const FittedCaptur
         IndirectLight coarse,
         IndirectLight::Build(*fitted.scene, fitted.atlas,
                              std::min(options.indirect_rays, kIndirectEvidenceRays)));
-    const IndirectEvidence evidence = MeasureIndirectEvidence(
-        fitted, coarse, options.indirect_bounces, options.cast_shadows, render);
+    const IndirectEvidence evidence =
+        MeasureIndirectEvidence(fitted, coarse, options.indirect_bounces, options.cast_shadows,
+                                supersampling, render);
     (*report)["evidence"] = {{"images", evidence.images},
                              {"renderer", renderer},
                              {"pixels", evidence.pixels},
@@ -710,8 +726,10 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   if (fitted->normal_map) {
     stray = PrepareStrayLight(*fitted, options, &indirect_report);
   } else {
-    REFLCAP_ASSIGN_OR_RETURN(indirect, PrepareIndirectLight(*fitted, options, evidence_render,
-                                                            evidence_renderer, &indirect_report));
+    REFLCAP_ASSIGN_OR_RETURN(indirect,
+                             PrepareIndirectLight(*fitted, options, render_options.supersampling,
+                                                  evidence_render, evidence_renderer,
+                                                  &indirect_report));
   }
   // Normal-map captures: the photographs' point spread (after the stray light, which the
   // evidence renders include).

@@ -521,7 +521,7 @@ TEST(RenderCapture, InterreflectionIsAddedOnlyWhenThePhotographsShowIt) {
     REFLCAP_CHECK(fitted.ok()) << fitted.status().ToString();
     auto table = render::IndirectLight::Build(*(*fitted)->scene, (*fitted)->atlas, 16);
     REFLCAP_CHECK(table.ok());
-    return render::MeasureIndirectEvidence(**fitted, *table, 2, true);
+    return render::MeasureIndirectEvidence(**fitted, *table, 2, true, 1);
   };
   const render::IndirectEvidence direct_only = evidence_of(*capture);
   std::printf("direct-light photographs: %zu unlit pixels in %d images, scale %.3f, error "
