@@ -371,6 +371,7 @@ VulkanMasks::~VulkanMasks() {
 }
 
 const std::string& VulkanMasks::device_name() const { return impl_->ctx->info().name; }
+bool VulkanMasks::software_device() const { return impl_->ctx->info().IsSoftware(); }
 const VulkanMaskStats& VulkanMasks::last_stats() const { return impl_->stats; }
 
 StatusOr<std::unique_ptr<VulkanMasks>> VulkanMasks::Create(const Capture& capture,

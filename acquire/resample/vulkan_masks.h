@@ -119,6 +119,8 @@ class VulkanMasks {
 
   // The Vulkan device's name ("llvmpipe (LLVM 15.0.6, 256 bits)").
   const std::string& device_name() const;
+  // Whether that device is the CPU (lavapipe): the host's cores then do the masks' work too.
+  bool software_device() const;
   const VulkanMaskStats& last_stats() const;
 
  private:

@@ -31,6 +31,7 @@ Status VulkanMasks::Process(uint32_t, const Image&, ImageOutput*, CameraMapView*
 }
 
 const std::string& VulkanMasks::device_name() const { return impl_->name; }
+bool VulkanMasks::software_device() const { return true; }
 const VulkanMaskStats& VulkanMasks::last_stats() const { return impl_->stats; }
 
 Status VulkanMasksAvailable(const std::string&) { return UnavailableError(kNoVulkan); }
