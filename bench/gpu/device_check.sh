@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# device_check.sh: one call's worth of GPU checks for issue 14, run on a lent GPU machine after
+# ../shared/tools/gpu-bundle.sh (carry .gl and .gpu; the command is
+#   . .gpu/run-prologue.sh && bash bench/gpu/device_check.sh
+# ). Writes its logs and the million run's reports under $OUT (at most 8 files come back) and
+# prints a summary. ~4.5 min on an H200 host: tests ~70 s, synth ~30 s, run ~45 s, fits ~20 s,
+# benchmarks ~40 s. Record every number with the device line it prints.
+set -u
+: "${BUILD:?source .gpu/run-prologue.sh first}" "${OUT:?run through the device tool (OUT unset)}"
+R=$BUILD/bin/reflcap
+T0=$(date +%s)
+stamp() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | tee "$OUT/device.txt"
+
+# 1. Every test, one process each (a teardown crash shows here), plus the masks' figures.
+timeout 240 ctest --test-dir "$BUILD" -j16 --timeout 150 -E layering --output-on-failure \
+  > "$OUT/ctest.log" 2>&1
+grep -E "tests passed|\*\*\*Failed|SEGFAULT|Timeout|Not Run" "$OUT/ctest.log" | head -20
+"$BUILD"/tests/acquire/resample/acquire_resample_test --gtest_filter='VulkanMasksTest.*' 2>&1 |
+  grep -E "max relative|agreeing|FAILED" | head -12
+stamp "tests done"
+
+# 2. The million preset end to end on the GPU, and the fit alone on both backends.
+{ time "$R" synth --preset million --out /tmp/mil --quiet ; } 2>&1 | grep real
+stamp "synth done"
+{ time "$R" run /tmp/mil --out /tmp/mil_run --backend vulkan ; } > "$OUT/run.log" 2>&1
+grep -E "reflcap run:|^real" "$OUT/run.log"
+python3 - "$OUT" <<'PY'
+import json, sys, shutil
+out = sys.argv[1]
+reports = {"resample": "/tmp/mil_run/samples/resample_report.json",
+           "render": "/tmp/mil_run/renders/render_report.json",
+           "metrics": "/tmp/mil_run/report/metrics.json",
+           "fit": "/tmp/mil_run/fit/fit_report.json"}
+merged = {}
+for name, path in reports.items():
+    try:
+        d = json.load(open(path))
+    except OSError as e:
+        merged[name] = str(e)
+        continue
+    merged[name] = {k: d[k] for k in ("timings", "timings_s", "vulkan", "pixel_model", "indirect")
+                    if k in d}
+json.dump(merged, open(out + "/reports.json", "w"), indent=1)
+print(json.dumps({k: v.get("timings", v.get("timings_s")) if isinstance(v, dict) else v
+                  for k, v in merged.items()})[:2000])
+PY
+stamp "run done"
+for b in vulkan cpu; do
+  { time "$R" fit /tmp/mil_run/samples --out /tmp/fit_$b --backend $b --quiet ; } 2>&1 | grep real
+done
+stamp "fits done"
+
+# 3. Micro-benchmarks: fits/s over 10^6 texels, render batches, transfers.
+timeout 120 "$BUILD"/bench/engine/reflcap_fit_bench --benchmark_filter='BM_FitTexels.*/1000000' 2>&1 |
+  grep -E "^BM_|device_" | tee "$OUT/fit_bench.txt"
+timeout 60 "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/512' 2>&1 |
+  grep -E "^BM_" | tee "$OUT/render_bench.txt"
+timeout 60 "$BUILD"/bench/gpu/reflcap_gpu_bench --benchmark_filter='BM_(Upload|Download)Staged/64|BM_Mad' 2>&1 |
+  grep -E "^BM_" | tee "$OUT/gpu_bench.txt"
+stamp "all done"
