@@ -38,9 +38,145 @@ Status RenderOptions::Validate() const {
   return OkStatus();
 }
 
-StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& camera,
-                                   const Light& light, const Rigid3& world_from_object,
-                                   double exposure_s, const RenderOptions& options) {
+namespace {
+
+// One image's shading as RenderImage traces it: the shared body of RenderImage (every pixel) and
+// RenderPixels (some). Inputs are checked by the callers.
+class ImageShader {
+ public:
+  ImageShader(const ShadedScene& shaded, const Camera& camera, const Light& light,
+              const Rigid3& world_from_object, double exposure_s, const RenderOptions& options,
+              const std::vector<float>* curvature)
+      : shaded_(shaded),
+        scene_(*shaded.scene),
+        mesh_(scene_.mesh()),
+        atlas_(*shaded.atlas),
+        options_(options),
+        rays_{camera, (camera.cam_from_world * world_from_object).Inverse()},
+        point_light_(light.type == LightType::kPoint),
+        intensity_(light.intensity.cast<float>()),
+        offset_(scene_.SurfaceOffset()),
+        n_(options.supersampling),
+        sample_weight_(float(exposure_s) / float(n_ * n_)) {
+    const Rigid3 object_from_world = world_from_object.Inverse();
+    light_in_object_ = (object_from_world * light.position).cast<float>();
+    light_dir_in_object_ = (object_from_world.rotation * light.direction).normalized().cast<float>();
+    if (options.aux_buffers) {
+      if (curvature == nullptr) {
+        own_curvature_ = SurfaceCurvature(mesh_);
+        curvature = &own_curvature_;
+      }
+      curvature_ = curvature;
+    }
+  }
+
+  // Pixel (x, y) of `result` (sized by the caller; its aux and mask at the pixel zero on entry):
+  // radiance (the N x N stratified average times exposure), mask and aux from the centre ray.
+  void ShadePixel(int x, int y, RenderResult* result) const {
+    float* aux = options_.aux_buffers ? result->aux.pixel(x, y) : nullptr;
+    Vec3f sum = Vec3f::Zero(), radiance;
+    if (n_ == 1) {
+      // The one sample is the centre ray: it gives the mask and the aux buffers too.
+      if (Shade(x, double(y), &radiance, aux)) result->mask.at(x, y) = 1;
+      sum = radiance;
+    } else {
+      if (aux) {
+        if (Shade(x, double(y), &radiance, aux)) result->mask.at(x, y) = 1;
+      } else {
+        Vec3f origin, dir;
+        rays_.Ray(x, double(y), &origin, &dir);
+        if (scene_.Intersect(origin, dir, 0, kInfinity).hit) result->mask.at(x, y) = 1;
+      }
+      for (int sy = 0; sy < n_; ++sy) {
+        for (int sx = 0; sx < n_; ++sx) {
+          // Stratum centres: offsets (i + 0.5)/n - 0.5 within the pixel.
+          Shade(x + (sx + 0.5) / n_ - 0.5, double(y) + (sy + 0.5) / n_ - 0.5, &radiance, nullptr);
+          sum += radiance;
+        }
+      }
+    }
+    float* px = result->pixels.pixel(x, y);
+    for (int c = 0; c < 3; ++c) px[c] = sum[c] * sample_weight_;
+  }
+
+ private:
+  // Traces the ray through (px, py) and returns its radiance contribution f E cos θi (before
+  // exposure); fills `aux` (kAuxChannelCount floats, zero on entry) when given. Returns false on
+  // a miss.
+  bool Shade(double px, double py, Vec3f* radiance, float* aux) const {
+    *radiance = Vec3f::Zero();
+    Vec3f origin, dir;
+    rays_.Ray(px, py, &origin, &dir);
+    const RayHit hit = scene_.Intersect(origin, dir, 0, kInfinity);
+    if (!hit.hit) return false;
+    const auto& tri = mesh_.triangles[hit.triangle];
+    const float b0 = 1 - hit.b1 - hit.b2;
+    const Vec3f p = b0 * mesh_.positions[tri[0]] + hit.b1 * mesh_.positions[tri[1]] +
+                    hit.b2 * mesh_.positions[tri[2]];
+    const Vec3f n_g = mesh_.GeometricNormal(hit.triangle);
+    const auto& cn = mesh_.corner_normals[hit.triangle];
+    const Vec3f n_s = (b0 * cn[0] + hit.b1 * cn[1] + hit.b2 * cn[2]).normalized();
+    const Vec3f wo = -dir;
+    Vec3f wi;
+    float dist = kInfinity;
+    Vec3f irradiance_per_cos = intensity_;
+    if (point_light_) {
+      const Vec3f to_light = light_in_object_ - p;
+      dist = to_light.norm();
+      wi = to_light / dist;
+      irradiance_per_cos /= dist * dist;
+    } else {
+      wi = light_dir_in_object_;
+    }
+    const float cos_i = n_s.dot(wi);
+    if (aux) {
+      aux[kAuxMask] = 1;
+      aux[kAuxCosThetaI] = cos_i;
+      aux[kAuxCosThetaO] = n_s.dot(wo);
+      aux[kAuxCurvature] = (*curvature_)[hit.triangle];
+    }
+    if (n_g.dot(wo) <= 0) return true;  // back face of an open mesh: black
+    if (cos_i <= 0 || n_g.dot(wi) <= 0) return true;
+    if (options_.cast_shadows &&
+        scene_.Occluded(p + offset_ * n_g, wi, 0, point_light_ ? dist - offset_ : kInfinity)) {
+      if (aux) aux[kAuxCastShadow] = 1;
+      return true;
+    }
+    const auto& cuv = mesh_.corner_uvs[hit.triangle];
+    const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
+    const int texel = atlas_.TexelUnderUv(uv);
+    if (texel < 0) return true;
+    // The texel's tangent frame, re-orthogonalised against the normal at the hit.
+    Vec3f t = atlas_.tangent[texel] - n_s * n_s.dot(atlas_.tangent[texel]);
+    if (t.squaredNorm() < 1e-12f) t = n_s.unitOrthogonal();  // tangent ∥ normal: any
+    t.normalize();
+    const Vec3f b = n_s.cross(t);
+    const Vec3f wi_local(t.dot(wi), b.dot(wi), cos_i);
+    const Vec3f wo_local(t.dot(wo), b.dot(wo), n_s.dot(wo));
+    if (wo_local.z() <= 0) return true;  // shading normal turned away from the viewer
+    const Vec3f f = brdf::EvalRgb(shaded_.maps->texels[texel], wi_local, wo_local);
+    *radiance = f.cwiseProduct(irradiance_per_cos) * cos_i;
+    return true;
+  }
+
+  const ShadedScene& shaded_;
+  const RayScene& scene_;
+  const TriangleMesh& mesh_;
+  const TexelAtlas& atlas_;
+  const RenderOptions options_;
+  const RayGenerator rays_;
+  const bool point_light_;
+  Vec3f light_in_object_, light_dir_in_object_;
+  const Vec3f intensity_;
+  const float offset_;
+  const int n_;
+  const float sample_weight_;
+  std::vector<float> own_curvature_;
+  const std::vector<float>* curvature_ = nullptr;
+};
+
+Status CheckRenderInputs(const ShadedScene& shaded, const Camera& camera,
+                         const RenderOptions& options) {
   REFLCAP_RETURN_IF_ERROR(options.Validate());
   REFLCAP_CHECK(shaded.scene && shaded.atlas && shaded.maps);
   REFLCAP_CHECK(shaded.maps->texels.size() == shaded.atlas->TexelCount());
@@ -48,116 +184,60 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& came
     return InvalidArgumentError("camera \"", camera.id,
                                 "\": orthographic rendering needs pixel_size_m");
   }
-  const RayScene& scene = *shaded.scene;
-  const TriangleMesh& mesh = scene.mesh();
-  const TexelAtlas& atlas = *shaded.atlas;
-  const Rigid3 object_from_world = world_from_object.Inverse();
-  const RayGenerator rays{camera, (camera.cam_from_world * world_from_object).Inverse()};
-  const bool point_light = light.type == LightType::kPoint;
-  const Vec3f light_in_object = (object_from_world * light.position).cast<float>();
-  const Vec3f light_dir_in_object =
-      (object_from_world.rotation * light.direction).normalized().cast<float>();
-  const Vec3f intensity = light.intensity.cast<float>();
-  const float offset = scene.SurfaceOffset();
-  const int n = options.supersampling;
-  const float sample_weight = float(exposure_s) / float(n * n);
-  std::vector<float> curvature;
-  if (options.aux_buffers) curvature = SurfaceCurvature(mesh);
+  return OkStatus();
+}
 
-  // Traces the ray through (px, py) and returns its radiance contribution f E cos θi (before
-  // exposure); fills `aux` (kAuxChannelCount floats, zero on entry) when given. Returns false on a
-  // miss.
-  auto shade = [&](double px, double py, Vec3f* radiance, float* aux) {
-    *radiance = Vec3f::Zero();
-    Vec3f origin, dir;
-    rays.Ray(px, py, &origin, &dir);
-    const RayHit hit = scene.Intersect(origin, dir, 0, kInfinity);
-    if (!hit.hit) return false;
-    const auto& tri = mesh.triangles[hit.triangle];
-    const float b0 = 1 - hit.b1 - hit.b2;
-    const Vec3f p = b0 * mesh.positions[tri[0]] + hit.b1 * mesh.positions[tri[1]] +
-                    hit.b2 * mesh.positions[tri[2]];
-    const Vec3f n_g = mesh.GeometricNormal(hit.triangle);
-    const auto& cn = mesh.corner_normals[hit.triangle];
-    const Vec3f n_s = (b0 * cn[0] + hit.b1 * cn[1] + hit.b2 * cn[2]).normalized();
-    const Vec3f wo = -dir;
-    Vec3f wi;
-    float dist = kInfinity;
-    Vec3f irradiance_per_cos = intensity;
-    if (point_light) {
-      const Vec3f to_light = light_in_object - p;
-      dist = to_light.norm();
-      wi = to_light / dist;
-      irradiance_per_cos /= dist * dist;
-    } else {
-      wi = light_dir_in_object;
-    }
-    const float cos_i = n_s.dot(wi);
-    if (aux) {
-      aux[kAuxMask] = 1;
-      aux[kAuxCosThetaI] = cos_i;
-      aux[kAuxCosThetaO] = n_s.dot(wo);
-      aux[kAuxCurvature] = curvature[hit.triangle];
-    }
-    if (n_g.dot(wo) <= 0) return true;  // back face of an open mesh: black
-    if (cos_i <= 0 || n_g.dot(wi) <= 0) return true;
-    if (options.cast_shadows &&
-        scene.Occluded(p + offset * n_g, wi, 0, point_light ? dist - offset : kInfinity)) {
-      if (aux) aux[kAuxCastShadow] = 1;
-      return true;
-    }
-    const auto& cuv = mesh.corner_uvs[hit.triangle];
-    const Vec2f uv = b0 * cuv[0] + hit.b1 * cuv[1] + hit.b2 * cuv[2];
-    const int texel = atlas.TexelUnderUv(uv);
-    if (texel < 0) return true;
-    // The texel's tangent frame, re-orthogonalised against the normal at the hit.
-    Vec3f t = atlas.tangent[texel] - n_s * n_s.dot(atlas.tangent[texel]);
-    if (t.squaredNorm() < 1e-12f) t = n_s.unitOrthogonal();  // tangent ∥ normal: any
-    t.normalize();
-    const Vec3f b = n_s.cross(t);
-    const Vec3f wi_local(t.dot(wi), b.dot(wi), cos_i);
-    const Vec3f wo_local(t.dot(wo), b.dot(wo), n_s.dot(wo));
-    if (wo_local.z() <= 0) return true;  // shading normal turned away from the viewer
-    const Vec3f f = brdf::EvalRgb(shaded.maps->texels[texel], wi_local, wo_local);
-    *radiance = f.cwiseProduct(irradiance_per_cos) * cos_i;
-    return true;
-  };
+}  // namespace
 
+StatusOr<RenderResult> RenderImage(const ShadedScene& shaded, const Camera& camera,
+                                   const Light& light, const Rigid3& world_from_object,
+                                   double exposure_s, const RenderOptions& options) {
+  REFLCAP_RETURN_IF_ERROR(CheckRenderInputs(shaded, camera, options));
+  const ImageShader shader(shaded, camera, light, world_from_object, exposure_s, options, nullptr);
   RenderResult result{Image(camera.width, camera.height, 3, 0.0f),
                       Image(camera.width, camera.height, 1, 0.0f), Image()};
   if (options.aux_buffers) result.aux = Image(camera.width, camera.height, kAuxChannelCount, 0.0f);
   ParallelFor(0, camera.height, 4, [&](int64_t y0, int64_t y1, int) {
     for (int64_t y = y0; y < y1; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        float* aux = options.aux_buffers ? result.aux.pixel(x, int(y)) : nullptr;
-        Vec3f sum = Vec3f::Zero(), radiance;
-        if (n == 1) {
-          // The one sample is the centre ray: it gives the mask and the aux buffers too.
-          if (shade(x, double(y), &radiance, aux)) result.mask.at(x, int(y)) = 1;
-          sum = radiance;
-        } else {
-          if (aux) {
-            if (shade(x, double(y), &radiance, aux)) result.mask.at(x, int(y)) = 1;
-          } else {
-            Vec3f origin, dir;
-            rays.Ray(x, double(y), &origin, &dir);
-            if (scene.Intersect(origin, dir, 0, kInfinity).hit) result.mask.at(x, int(y)) = 1;
-          }
-          for (int sy = 0; sy < n; ++sy) {
-            for (int sx = 0; sx < n; ++sx) {
-              // Stratum centres: offsets (i + 0.5)/n - 0.5 within the pixel.
-              shade(x + (sx + 0.5) / n - 0.5, double(y) + (sy + 0.5) / n - 0.5, &radiance,
-                    nullptr);
-              sum += radiance;
-            }
-          }
-        }
-        float* px = result.pixels.pixel(x, int(y));
-        for (int c = 0; c < 3; ++c) px[c] = sum[c] * sample_weight;
-      }
+      for (int x = 0; x < camera.width; ++x) shader.ShadePixel(x, int(y), &result);
     }
   });
   return result;
+}
+
+Status RenderPixels(const ShadedScene& shaded, const Camera& camera, const Light& light,
+                    const Rigid3& world_from_object, double exposure_s,
+                    const RenderOptions& options, const std::vector<float>* curvature,
+                    const std::vector<uint32_t>& pixels, RenderResult* result) {
+  REFLCAP_RETURN_IF_ERROR(CheckRenderInputs(shaded, camera, options));
+  const size_t count = size_t(camera.width) * camera.height;
+  if (result->pixels.width != camera.width || result->pixels.height != camera.height ||
+      result->pixels.channels != 3 || result->mask.data.size() != count ||
+      (options.aux_buffers && result->aux.data.size() != count * kAuxChannelCount)) {
+    return InvalidArgumentError("RenderPixels: the result is not a ", camera.width, "x",
+                                camera.height, " render of camera \"", camera.id, "\"");
+  }
+  for (uint32_t i : pixels) {
+    if (i >= count) {
+      return InvalidArgumentError("RenderPixels: pixel ", i, " outside the ", camera.width, "x",
+                                  camera.height, " image");
+    }
+  }
+  const ImageShader shader(shaded, camera, light, world_from_object, exposure_s, options,
+                           curvature);
+  ParallelFor(0, int64_t(pixels.size()), 64, [&](int64_t begin, int64_t end, int) {
+    for (int64_t k = begin; k < end; ++k) {
+      const uint32_t i = pixels[size_t(k)];
+      const int x = int(i % uint32_t(camera.width)), y = int(i / uint32_t(camera.width));
+      // Written afresh, as RenderImage writes a pixel of a zeroed result.
+      result->mask.at(x, y) = 0;
+      if (options.aux_buffers) {
+        std::fill_n(result->aux.pixel(x, y), kAuxChannelCount, 0.0f);
+      }
+      shader.ShadePixel(x, y, result);
+    }
+  });
+  return OkStatus();
 }
 
 const std::vector<std::string>& AuxChannelNames() {

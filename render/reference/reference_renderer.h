@@ -106,6 +106,17 @@ StatusOr<RenderResult> RenderImage(const ShadedScene& scene, const Camera& camer
                                    const Light& light, const Rigid3& world_from_object,
                                    double exposure_s, const RenderOptions& options);
 
+// Shades pixels `pixels` (row-major indices) of `result`, a camera.width x camera.height render
+// with options' layout (aux when aux_buffers), exactly as RenderImage would — same rays,
+// supersampling and aux — overwriting their radiance, mask and aux. The Vulkan renderer has the
+// pixels its shadow map could not decide shaded so. `curvature`: SurfaceCurvature of the scene's
+// mesh when the caller has it (else computed here when aux_buffers). InvalidArgument for a result
+// of another size or a pixel outside it.
+Status RenderPixels(const ShadedScene& scene, const Camera& camera, const Light& light,
+                    const Rigid3& world_from_object, double exposure_s,
+                    const RenderOptions& options, const std::vector<float>* curvature,
+                    const std::vector<uint32_t>& pixels, RenderResult* result);
+
 // Renders one photograph of a normal-map capture: atlas from BuildNormalMapAtlas (texel = pixel of
 // `camera`, normals in the world frame), maps one entry per texel. pixel = exposure_s * f(wi, wo) *
 // I * max(0, cos θi) with wi = light.direction (InvalidArgument for a point light: the surface

@@ -198,7 +198,9 @@ Status VulkanRenderOptions::Validate() const {
 std::string VulkanBatchStats::ToString() const {
   return StrCat(images, " images in ", submissions, " submissions, ", seconds, " s (record ",
                 record_s, " s, wait ", wait_s, " s, read-back ", readback_s, " s, sink ", sink_s,
-                " s); shadow maps drawn ", shadow_maps_drawn, ", reused ", shadow_maps_reused);
+                " s); shadow maps drawn ", shadow_maps_drawn, ", reused ", shadow_maps_reused,
+                "; ", shadow_edge_pixels, " shadow-edge pixels shaded on the host in ",
+                shadow_edge_s, " s");
 }
 
 // ---- Impl -----------------------------------------------------------------------------------
@@ -221,6 +223,12 @@ struct ImagePlan {
   sh::RenderParams hires_params{};  // the supersampled camera pass (Supersampled())
   sh::HeightFieldMarch march{};     // normal maps: the height-field shadow march (steps 0: none)
   VulkanRenderStats stats;          // shadow map and visibility of this image
+  // Mesh images: what the host needs to shade shadow-edge pixels (RenderPixels).
+  const Camera* camera = nullptr;
+  const Light* light = nullptr;
+  Rigid3 world_from_object;
+  double exposure_s = 1;
+  RenderOptions options;
 
   bool Supersampled() const { return !normal_map && !distorted && supersampling > 1; }
   uint64_t OutBytes() const { return uint64_t(width) * uint64_t(height) * 16; }
@@ -319,6 +327,10 @@ struct VulkanRenderer::Impl {
 
   // Scene.
   enum class SceneKind { kNone, kMesh, kNormalMap } scene_kind = SceneKind::kNone;
+  // Mesh scenes: the caller's scene (shadow-edge pixels are shaded with its rays) and its
+  // SurfaceCurvature.
+  ShadedScene mesh_scene;
+  std::vector<float> mesh_curvature;
   std::unique_ptr<Buffer> corners, triangles, normal_map_texels;
   // Normal-map scenes: the height field (heights_px uploaded; one float when there is none), and
   // the host copy its marches are planned from.
@@ -562,6 +574,11 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
     return InvalidArgumentError("camera \"", camera.id, "\" has no pixels");
   }
   ImagePlan plan;
+  plan.camera = &camera;
+  plan.light = &light;
+  plan.world_from_object = world_from_object;
+  plan.exposure_s = exposure_s;
+  plan.options = options;
   const int w = camera.width, h = camera.height, n = options.supersampling;
   const bool distorted = pinhole && (camera.HasDistortion() || this->options.always_resolve);
   const bool point_light = light.type == LightType::kPoint;
@@ -1084,6 +1101,8 @@ void VulkanRenderer::Impl::ReadBack(const Flight& flight, std::vector<RenderResu
     r.mask = Image(plan.width, plan.height, 1, 0.0f);
     if (plan.aux) r.aux = Image(plan.width, plan.height, kAuxChannelCount, 0.0f);
   });
+  // Pixels at shadow-map edges, per task (row-major within each image, tasks in image order).
+  std::vector<std::vector<uint32_t>> edges(tasks.size());
   parallel(int64_t(tasks.size()), [&](int64_t t) {
     const Task& task = tasks[size_t(t)];
     const ImagePlan& plan = all[flight.images[task.k]];
@@ -1093,14 +1112,23 @@ void VulkanRenderer::Impl::ReadBack(const Flight& flight, std::vector<RenderResu
     const float* ax = static_cast<const float*>(slot.out_aux->mapped());
     const float* mask = plan.Supersampled() ? static_cast<const float*>(slot.out_mask->mapped())
                                             : rad;
+    // The radiance alpha is 1 where a surface was hit + 2 at a shadow edge (shading.glsl
+    // kShadowEdgeAlpha; the supersampled pass's downsample carries the edge alone, its mask
+    // comes from the 1x pass): the mask is bit 0 of the mask's alpha, the edge bit 1 of the
+    // radiance's.
+    const bool edges_wanted = !plan.normal_map && options.exact_shadow_edges &&
+                              plan.options.cast_shadows;
     // Pixels outside the rectangle stay 0: background, as the passes clear it.
     for (int y = task.y0; y < task.y1; ++y) {
       const size_t begin = size_t(y) * plan.width + size_t(plan.rect_x0);
       const size_t end = begin + size_t(plan.rect_w);
       for (size_t i = begin; i < end; ++i) {
         for (int c = 0; c < 3; ++c) result.pixels.data[i * 3 + c] = rad[i * 4 + c];
-        const float m = mask[i * 4 + 3] > 0.5f ? 1.0f : 0.0f;
+        const float m = (int(mask[i * 4 + 3] + 0.5f) & 1) != 0 ? 1.0f : 0.0f;
         result.mask.data[i] = m;
+        if (edges_wanted && (int(rad[i * 4 + 3] + 0.5f) & 2) != 0) {
+          edges[size_t(t)].push_back(uint32_t(i));
+        }
         if (plan.aux) {
           float* a = &result.aux.data[i * kAuxChannelCount];
           a[kAuxCastShadow] = ax[i * 4 + 0];
@@ -1112,6 +1140,24 @@ void VulkanRenderer::Impl::ReadBack(const Flight& flight, std::vector<RenderResu
       }
     }
   });
+  // Those pixels shaded as the CPU reference renderer shades them.
+  const auto edge_start = std::chrono::steady_clock::now();
+  size_t task = 0;
+  for (size_t k = 0; k < count; ++k) {
+    std::vector<uint32_t> pixels;
+    for (; task < tasks.size() && tasks[task].k == k; ++task) {
+      pixels.insert(pixels.end(), edges[task].begin(), edges[task].end());
+    }
+    if (pixels.empty()) continue;
+    const ImagePlan& plan = all[flight.images[k]];
+    const Status s = RenderPixels(mesh_scene, *plan.camera, *plan.light, plan.world_from_object,
+                                  plan.exposure_s, plan.options, &mesh_curvature, pixels,
+                                  &(*results)[k]);
+    // The plan checked camera and options, and the result has the plan's size.
+    REFLCAP_CHECK(s.ok()) << s.ToString();
+    batch_stats.shadow_edge_pixels += pixels.size();
+  }
+  batch_stats.shadow_edge_s += SecondsSince(edge_start);
 }
 
 Status VulkanRenderer::Impl::CompleteOldest() {
@@ -1299,7 +1345,7 @@ Status VulkanRenderer::SetScene(const ShadedScene& scene) {
   for (const std::unique_ptr<CachedTarget>& t : m.shadow_maps) t->content.clear();
   std::vector<sh::RenderCorner> corners(mesh.TriangleCount() * 3);
   std::vector<sh::RenderTriangle> triangles(mesh.TriangleCount());
-  const std::vector<float> curvature = SurfaceCurvature(mesh);
+  std::vector<float> curvature = SurfaceCurvature(mesh);
   const std::vector<std::array<int32_t, 3>> neighbours = TriangleNeighbours(mesh);
   for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
     for (int c = 0; c < 3; ++c) {
@@ -1326,6 +1372,8 @@ Status VulkanRenderer::SetScene(const ShadedScene& scene) {
   m.bounds = box.cast<double>();
   m.sphere_radius = 0.5 * box.diagonal().cast<double>().norm() * kSphereInflation;
   m.surface_offset = scene.scene->SurfaceOffset();
+  m.mesh_scene = scene;
+  m.mesh_curvature = std::move(curvature);
   m.scene_kind = Impl::SceneKind::kMesh;
   return OkStatus();
 }

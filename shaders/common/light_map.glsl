@@ -23,19 +23,22 @@ int LightMapViewOf(vec3 p, vec3 light, uint num_views) {
   return d.z >= 0.0 ? 4 : 5;
 }
 
-// Whether p (geometric normal n_g, facing the light), at clip position `clip` in light-map view
-// `view` (layer of `map`; origin, forward, right, up as in LightMapView), is in cast
-// shadow: stored distance < t_plane - bias, bias = bias.x + bias.y * footprint *
-// (1 + min(tan θ, kMaxLightMapSlope)), t_plane at most bias.z footprints behind p.
-bool LightMapShadowed(sampler2DArray map, int view, vec4 clip, vec4 origin4, vec4 forward,
-                      vec4 right, vec4 up, uint resolution, vec3 p, vec3 n_g, vec3 bias) {
-  // w > 0 inside every view the hosts build (the object lies in front of the light); guard the
-  // division anyway so that no NaN reaches the comparison.
-  if (!(clip.w > 0.0)) return false;
+// The light-map texel holding clip position `clip` (NDC x, y mapped to [0, resolution)).
+// Clamped: a point exactly on the frustum's border (NDC ±1) still reads the edge texel.
+vec2 LightMapTexelOf(vec4 clip, uint resolution) {
   vec2 ndc = clip.xy / clip.w;
   float res = float(resolution);
-  // Clamped: a point exactly on the frustum's border (NDC ±1) still reads the edge texel.
-  vec2 texel = clamp(floor((ndc * 0.5 + 0.5) * res), vec2(0.0), vec2(res - 1.0));
+  return clamp(floor((ndc * 0.5 + 0.5) * res), vec2(0.0), vec2(res - 1.0));
+}
+
+// Whether p (geometric normal n_g, facing the light) is in cast shadow by light-map texel
+// `texel` of view `view` (layer of `map`; origin, forward, right, up as in LightMapView): stored
+// distance < t_plane - bias, bias = bias.x + bias.y * footprint * (1 + min(tan θ,
+// kMaxLightMapSlope)), t_plane (where the texel's ray meets the plane through p with normal n_g)
+// at most bias.z footprints behind p.
+bool LightMapTexelShadowed(sampler2DArray map, int view, vec2 texel, vec4 origin4, vec4 forward,
+                           vec4 right, vec4 up, uint resolution, vec3 p, vec3 n_g, vec3 bias) {
+  float res = float(resolution);
   vec2 centre = (texel + 0.5) / res * 2.0 - 1.0;
   bool perspective = origin4.w > 0.5;
   vec3 origin = origin4.xyz;
@@ -61,6 +64,41 @@ bool LightMapShadowed(sampler2DArray map, int view, vec4 clip, vec4 origin4, vec
   float tan_g = sqrt(max(1.0 - cos_g * cos_g, 0.0)) / cos_g;  // max: rounding of cos_g near 1
   float total_bias = bias.x + bias.y * footprint * (1.0 + min(tan_g, kMaxLightMapSlope));
   return stored < t_plane - total_bias;
+}
+
+// Whether p, at clip position `clip` in view `view`, is in cast shadow: the test of the texel
+// holding it (LightMapTexelShadowed).
+bool LightMapShadowed(sampler2DArray map, int view, vec4 clip, vec4 origin4, vec4 forward,
+                      vec4 right, vec4 up, uint resolution, vec3 p, vec3 n_g, vec3 bias) {
+  // w > 0 inside every view the hosts build (the object lies in front of the light); guard the
+  // division anyway so that no NaN reaches the comparison.
+  if (!(clip.w > 0.0)) return false;
+  return LightMapTexelShadowed(map, view, LightMapTexelOf(clip, resolution), origin4, forward,
+                               right, up, resolution, p, n_g, bias);
+}
+
+// Whether the light map cannot tell p's shadow to within a texel: some texel of the 3 x 3 around
+// the one holding p decides otherwise than `shadowed` (an occluder's silhouette, seen from the
+// light, passes within a texel of p). There the map's answer may differ from the exact ray's —
+// at 1024 px and the default resolution, ~100 pixels an image flipped between lit and shadow —
+// so the Vulkan renderer has the host shade those pixels with rays (vulkan_renderer.cc).
+bool LightMapShadowEdge(sampler2DArray map, int view, vec4 clip, vec4 origin4, vec4 forward,
+                        vec4 right, vec4 up, uint resolution, vec3 p, vec3 n_g, vec3 bias,
+                        bool shadowed) {
+  if (!(clip.w > 0.0)) return false;
+  vec2 texel = LightMapTexelOf(clip, resolution);
+  float last = float(resolution) - 1.0;
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      vec2 q = texel + vec2(dx, dy);
+      if ((dx == 0 && dy == 0) || q.x < 0.0 || q.y < 0.0 || q.x > last || q.y > last) continue;
+      if (LightMapTexelShadowed(map, view, q, origin4, forward, right, up, resolution, p, n_g,
+                                bias) != shadowed) {
+        return true;
+      }
+    }
+  }
+  return false;
 }
 
 #endif  // REFLCAP_SHADERS_COMMON_LIGHT_MAP_GLSL_

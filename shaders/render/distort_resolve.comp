@@ -119,6 +119,7 @@ struct Sample {
   bool hit;
   vec3 radiance;
   vec4 aux;
+  bool shadow_edge;
 };
 
 Sample TraceSample(vec2 pixel) {
@@ -126,6 +127,7 @@ Sample TraceSample(vec2 pixel) {
   s.hit = false;
   s.radiance = vec3(0.0);
   s.aux = vec4(0.0);
+  s.shadow_edge = false;
   float yd = (pixel.y - params.intrinsics.w) / params.intrinsics.y;
   float xd = (pixel.x - params.intrinsics.z - params.intrinsics_extra.x * yd) / params.intrinsics.x;
   vec2 xy = Undistort(vec2(xd, yd), params.distortion, params.distortion_extra.x);
@@ -145,6 +147,7 @@ Sample TraceSample(vec2 pixel) {
   Shade sh = ShadeSurface(sp.p, sp.n_s, tri.xyz, sp.uv, -d, tri.w);
   s.radiance = sh.radiance;
   s.aux = sh.aux;
+  s.shadow_edge = sh.shadow_edge;
   return s;
 }
 
@@ -155,16 +158,20 @@ void main() {
   Sample centre = TraceSample(vec2(px));
   uint n = params.supersampling;
   vec3 sum = centre.radiance;
+  bool edge = centre.shadow_edge;
   if (n > 1u) {
     sum = vec3(0.0);
     for (uint sy = 0u; sy < n; ++sy) {
       for (uint sx = 0u; sx < n; ++sx) {
         // Stratum centres: offsets (i + 0.5) / n - 0.5 within the pixel, as the CPU renderer.
         vec2 offset = (vec2(sx, sy) + 0.5) / float(n) - 0.5;
-        sum += TraceSample(vec2(px) + offset).radiance;
+        Sample s = TraceSample(vec2(px) + offset);
+        sum += s.radiance;
+        edge = edge || s.shadow_edge;
       }
     }
   }
-  out_radiance[index] = vec4(sum * params.intensity.w, centre.hit ? 1.0 : 0.0);
+  out_radiance[index] = vec4(sum * params.intensity.w,
+                             (centre.hit ? 1.0 : 0.0) + (edge ? kShadowEdgeAlpha : 0.0));
   out_aux[index] = centre.aux;
 }

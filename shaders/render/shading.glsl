@@ -26,8 +26,10 @@
 // shadows start a few footprints late (further at grazing light, where the lit radiance, ∝ cos θ,
 // is small anyway); the default resolution puts several shadow texels in an image pixel, so this
 // stays within a pixel of the shadow edge. Shadow edges are quantised to shadow texels (one
-// sample, no filtering, so the result stays binary like the CPU's occlusion ray). The test itself
-// is common/light_map.glsl's LightMapShadowed, which the Vulkan masks call too.
+// sample, no filtering, so the result stays binary like the CPU's occlusion ray); a point within a
+// texel of an edge (LightMapShadowEdge) is marked (Shade::shadow_edge), and the host shades its
+// pixel with rays, so the render's shadow edges are the CPU's. The test itself is
+// common/light_map.glsl's LightMapShadowed, which the Vulkan masks call too.
 #ifndef REFLCAP_SHADERS_RENDER_SHADING_GLSL_
 #define REFLCAP_SHADERS_RENDER_SHADING_GLSL_
 
@@ -72,25 +74,36 @@ bool TexelOfHit(vec2 uv, out ivec2 texel) {
   return false;
 }
 
-// Whether p (geometric normal n_g, facing the light) is in shadow; see the file comment.
-bool InShadow(vec3 p, vec3 n_g) {
+// Whether p (geometric normal n_g, facing the light) is in shadow; see the file comment. `edge`:
+// the map cannot tell to within a texel (LightMapShadowEdge).
+bool InShadow(vec3 p, vec3 n_g, out bool edge) {
   int v = LightMapViewOf(p, params.light.xyz, params.num_shadow_views);
   LightMapView view = params.views[v];
   vec4 clip = TransformRows(view.clip_from_object, p);
-  return LightMapShadowed(shadow_map, v, clip, view.origin, view.forward, view.right, view.up,
-                          params.shadow_resolution, p, n_g, params.shadow_bias.xyz);
+  bool shadowed = LightMapShadowed(shadow_map, v, clip, view.origin, view.forward, view.right,
+                                   view.up, params.shadow_resolution, p, n_g,
+                                   params.shadow_bias.xyz);
+  edge = LightMapShadowEdge(shadow_map, v, clip, view.origin, view.forward, view.right, view.up,
+                            params.shadow_resolution, p, n_g, params.shadow_bias.xyz, shadowed);
+  return shadowed;
 }
 
 struct Shade {
   vec3 radiance;  // f E (before the pixel weight)
   vec4 aux;       // cast_shadow, cos_theta_i, cos_theta_o, curvature (AuxChannel order)
+  bool shadow_edge;  // the shadow map cannot tell this point's shadow (InShadow's `edge`)
 };
+
+// A pass's radiance alpha: 1 where a surface was hit, + 2 where its shadow is a shadow edge
+// (kShadowEdgeAlpha; the host shades those pixels with rays). Hosts read the mask as bit 0.
+const float kShadowEdgeAlpha = 2.0;
 
 // Shades surface point p (object frame) with unit shading normal n_s, unit geometric normal n_g,
 // texture coordinates uv and unit direction to the viewer wo; `curvature` is copied to aux.
 Shade ShadeSurface(vec3 p, vec3 n_s, vec3 n_g, vec2 uv, vec3 wo, float curvature) {
   Shade s;
   s.radiance = vec3(0.0);
+  s.shadow_edge = false;
   vec3 wi;
   vec3 irradiance_per_cos = params.intensity.rgb;
   if ((params.flags & kRenderFlagPointLight) != 0u) {
@@ -105,7 +118,7 @@ Shade ShadeSurface(vec3 p, vec3 n_s, vec3 n_g, vec2 uv, vec3 wo, float curvature
   s.aux = vec4(0.0, cos_i, dot(n_s, wo), curvature);
   if (dot(n_g, wo) <= 0.0) return s;  // back face of an open mesh: black
   if (cos_i <= 0.0 || dot(n_g, wi) <= 0.0) return s;
-  if ((params.flags & kRenderFlagCastShadows) != 0u && InShadow(p, n_g)) {
+  if ((params.flags & kRenderFlagCastShadows) != 0u && InShadow(p, n_g, s.shadow_edge)) {
     s.aux.x = 1.0;
     return s;
   }

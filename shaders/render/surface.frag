@@ -10,7 +10,8 @@
 // Bindings (set 0): 0 RenderParams, 1 RenderCorner[], 2 RenderTriangle[], 3 material, 4 frame,
 //                   5 shadow map
 //                   (render/render_inputs.glsl).
-// Outputs: location 0 = (exposure-weighted radiance, mask 1), location 1 = aux (cast_shadow,
+// Outputs: location 0 = (exposure-weighted radiance, 1 + kShadowEdgeAlpha at a shadow edge),
+//          location 1 = aux (cast_shadow,
 //          cos_theta_i, cos_theta_o, curvature). Background pixels keep the clear value 0.
 // C++ twin: `shade` in render/reference/reference_renderer.cc.
 #extension GL_GOOGLE_include_directive : require
@@ -48,6 +49,7 @@ void main() {
   vec3 wo = (params.flags & kRenderFlagPinhole) != 0u ? normalize(params.camera_origin.xyz - p)
                                                        : -params.camera_axis.xyz;
   Shade s = ShadeSurface(p, n_s, tri.xyz, uv, wo, tri.w);
-  out_radiance_mask = vec4(s.radiance * params.intensity.w, 1.0);
+  out_radiance_mask =
+      vec4(s.radiance * params.intensity.w, 1.0 + (s.shadow_edge ? kShadowEdgeAlpha : 0.0));
   out_aux = s.aux;
 }

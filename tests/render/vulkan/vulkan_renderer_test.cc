@@ -279,6 +279,59 @@ TEST_F(VulkanRendererScenes, KnownOccluderUnderEveryShadowMapMatchesCpu) {
   }
 }
 
+// Shadow edges are the CPU's to the pixel: with a deliberately coarse shadow map (64 texels per
+// side for a 160 px image) the map alone flips pixels along the occluder's shadow between lit
+// and shadowed; the pixels it cannot decide (VulkanRenderOptions::exact_shadow_edges) are shaded
+// with rays on the host, and then every pixel, the edge band included, agrees — at one ray per
+// pixel, 2 x 2 supersampled, and through the distortion path.
+TEST_F(VulkanRendererScenes, ShadowEdgesAreTheCpusWithACoarseShadowMap) {
+  Scene s = MakeOccluderScene();
+  const Camera cam = LookAtCamera({0.1, -1.2, 2.2}, {0, 0, 0}, 160, 160, 120);
+  Light light;
+  light.position = {0.3, -0.3, 1.9};
+  light.intensity = {1.5, 1.5, 1.5};
+  struct Case {
+    const char* name;
+    int supersampling;
+    bool always_resolve;
+  };
+  for (const Case c : {Case{"1 ray", 1, false}, Case{"2 x 2 rays", 2, false},
+                       Case{"resolve path", 1, true}}) {
+    SCOPED_TRACE(c.name);
+    auto cpu = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, WithAux(c.supersampling));
+    ASSERT_TRUE(cpu.ok());
+    size_t mismatches_map_alone = 0;
+    for (const bool exact : {false, true}) {
+      VulkanRenderOptions vo;
+      vo.shadow_resolution = 64;
+      vo.always_resolve = c.always_resolve;
+      vo.exact_shadow_edges = exact;
+      const char* device = std::getenv("REFLCAP_TEST_VK_DEVICE");
+      auto r = VulkanRenderer::Create(device ? device : "", vo);
+      ASSERT_TRUE(r.ok()) << r.status().ToString();
+      ASSERT_TRUE((*r)->SetScene(s.shaded()).ok());
+      auto gpu = (*r)->RenderImage(cam, light, Rigid3(), 1.0, WithAux(c.supersampling));
+      ASSERT_TRUE(gpu.ok()) << gpu.status().ToString();
+      // Every pixel: no band around edges is left out.
+      const Agreement a = Compare(*cpu, *gpu, 0.0);
+      std::printf("[ vulkan   ] coarse shadow map, %s, exact edges %s: %s; host-shaded %zu px\n",
+                  c.name, exact ? "on" : "off", a.ToString().c_str(),
+                  (*r)->last_batch_stats().shadow_edge_pixels);
+      if (!exact) {
+        mismatches_map_alone = a.shadow_mismatches;
+        EXPECT_EQ((*r)->last_batch_stats().shadow_edge_pixels, 0u);
+        continue;
+      }
+      EXPECT_GT((*r)->last_batch_stats().shadow_edge_pixels, 0u);
+      EXPECT_EQ(a.shadow_mismatches, 0u);
+      EXPECT_EQ(a.mask_mismatches, 0u);
+      EXPECT_GE(a.psnr_db, kMinPsnrDb);
+    }
+    // Teeth: the coarse map alone gets edge pixels wrong.
+    EXPECT_GT(mismatches_map_alone, 10u);
+  }
+}
+
 TEST_F(VulkanRendererScenes, SupersamplingMatchesCpu) {
   Scene s = MakeOccluderScene();
   ASSERT_TRUE(renderer().SetScene(s.shaded()).ok());
