@@ -659,7 +659,6 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     }
   }
   REFLCAP_RETURN_IF_ERROR(stream_done());
-  for (auto& f : ahead) f.wait();  // none left unless the loop ended early
   progress.Finish();
   outputs[0] = outputs[1] = ImageOutput();
   embree_output = ImageOutput();

@@ -82,9 +82,8 @@ StatusOr<std::unique_ptr<FitTexels>> FitTexels::Load(const Capture& capture,
                                                      const fs::path& samples_dir) {
   auto f = std::unique_ptr<FitTexels>(new FitTexels());
   f->capture_ = &capture;
-  f->params_ = fit_dir / "params.exr";
-  f->samples_dir_ = samples_dir;
-  REFLCAP_ASSIGN_OR_RETURN(ImageInfo params_info, ReadExrInfo(f->params_));
+  const fs::path params = fit_dir / "params.exr";
+  REFLCAP_ASSIGN_OR_RETURN(ImageInfo params_info, ReadExrInfo(params));
   if (capture.normal_map) {
     // The atlas is the camera's masked pixels (BuildNormalMapAtlas): the pixel is the texel.
     const NormalMapGeometry& g = *capture.normal_map;
@@ -94,7 +93,7 @@ StatusOr<std::unique_ptr<FitTexels>> FitTexels::Load(const Capture& capture,
   } else {
     REFLCAP_ASSIGN_OR_RETURN(f->mesh_, LoadMesh(capture.Resolve(capture.mesh)));
     auto built = BuildTexelAtlas(f->mesh_, params_info.width, params_info.height);
-    if (!built.ok()) return built.status().WithContext(f->params_.string());
+    if (!built.ok()) return built.status().WithContext(params.string());
     f->atlas_ = std::move(built).value();
     REFLCAP_ASSIGN_OR_RETURN(f->scene_, RayScene::Create(f->mesh_));
   }
@@ -104,7 +103,7 @@ StatusOr<std::unique_ptr<FitTexels>> FitTexels::Load(const Capture& capture,
                                                        HardwareThreads()));
   if (f->status_.width != f->atlas_.width || f->status_.height != f->atlas_.height) {
     return InvalidArgumentError(status.string(), ": is ", f->status_.width, "x",
-                                f->status_.height, " but the atlas of ", f->params_.string(),
+                                f->status_.height, " but the atlas of ", params.string(),
                                 " is ", f->atlas_.width, "x", f->atlas_.height);
   }
   if (auto text = ReadTextFile(fit_dir / "fit_report.json"); text.ok()) {
@@ -119,7 +118,7 @@ StatusOr<std::unique_ptr<FitTexels>> FitTexels::Load(const Capture& capture,
     const SampleStoreInfo& info = f->store_->info();
     if (info.texels != f->atlas_.TexelCount()) {
       return InvalidArgumentError(samples_dir.string(), ": the store has ", info.texels,
-                                  " texels but the atlas of ", f->params_.string(), " has ",
+                                  " texels but the atlas of ", params.string(), " has ",
                                   f->atlas_.TexelCount(), ": not the fit's store");
     }
   }

@@ -68,7 +68,6 @@ class FitTexels {
  private:
   FitTexels() = default;
   const Capture* capture_ = nullptr;
-  std::filesystem::path params_, samples_dir_;
   TriangleMesh mesh_;
   TexelAtlas atlas_;
   std::unique_ptr<RayScene> scene_;

@@ -25,7 +25,6 @@
 #define REFLCAP_MASK_TRIANGLES
 #define REFLCAP_MASK_LIGHT_MAP
 #define REFLCAP_MASK_TEXEL_OF_PIXEL
-#include "common/ray_triangle.glsl"
 #include "resample/masks_common.glsl"
 
 layout(push_constant) uniform Push { MaskDrawPush push; };
@@ -36,44 +35,21 @@ layout(location = 2) in vec2 in_uv;
 layout(location = 0) out vec4 out_map;
 layout(location = 1) out vec4 out_normal;
 
-// The object-frame ray through camera-map texel `map_pixel` (centres at integer coordinates):
-// the map's own pinhole intrinsics (the photograph's, or the undistorted grid's of a distorted
-// camera; vulkan_masks.cc CameraGrid) from the camera centre, or an orthographic camera's parallel
-// ray from the plane z = 0 (Camera::PixelRay's cx = (width - 1) / 2).
-void MapTexelRay(vec2 map_pixel, out vec3 o, out vec3 d) {
-  vec3 d_cam = vec3(0.0, 0.0, 1.0), o_cam = vec3(0.0);
-  if ((params.flags & kMaskFlagPinhole) != 0u) {
-    vec4 k = params.map_intrinsics;  // fx, fy, cx, cy
-    float yn = (map_pixel.y - k.w) / k.y;
-    float xn = (map_pixel.x - k.z - params.map_intrinsics_extra.x * yn) / k.x;
-    d_cam = vec3(xn, yn, 1.0);
-  } else {
-    float pixel_m = params.intrinsics_extra.y;
-    o_cam = vec3((map_pixel.x - 0.5 * float(params.map_width - 1u)) * pixel_m,
-                 (map_pixel.y - 0.5 * float(params.map_height - 1u)) * pixel_m, 0.0);
-  }
-  o = MaskTransform3(params.object_from_cam, o_cam, 1.0);
-  d = normalize(MaskTransform3(params.object_from_cam, d_cam, 0.0));
-}
-
 void main() {
   vec3 p = in_position;
   vec3 n_interp = in_normal;
   vec2 uv = in_uv;
   uint tri = uint(gl_PrimitiveID);
   vec3 o, d;
-  MapTexelRay(gl_FragCoord.xy - 0.5, o, d);
+  MaskMapTexelRay(gl_FragCoord.xy - 0.5, o, d);
   float t;
   vec3 b;
   // A ray parallel to the triangle's plane (seen edge-on) keeps the interpolated attributes.
-  if (RayTrianglePlane(o, d, corners[3u * tri].position.xyz, corners[3u * tri + 1u].position.xyz,
-                       corners[3u * tri + 2u].position.xyz, t, b) &&
-      t > 0.0) {
-    MaskCorner c0 = corners[3u * tri], c1 = corners[3u * tri + 1u], c2 = corners[3u * tri + 2u];
-    p = b.x * c0.position.xyz + b.y * c1.position.xyz + b.z * c2.position.xyz;
-    n_interp = b.x * c0.normal.xyz + b.y * c1.normal.xyz + b.z * c2.normal.xyz;
-    uv = b.x * vec2(c0.position.w, c0.normal.w) + b.y * vec2(c1.position.w, c1.normal.w) +
-         b.z * vec2(c2.position.w, c2.normal.w);
+  if (MaskRayMeetsTriangle(o, d, tri, t, b)) {
+    MaskSurface hit = MaskSurfaceAt(tri, b);
+    p = hit.p;
+    n_interp = hit.n;
+    uv = hit.uv;
   }
   vec3 centre = params.camera_centre.xyz;
   float distance = (params.flags & kMaskFlagPinhole) != 0u ? length(p - centre)

@@ -40,7 +40,6 @@
 #define REFLCAP_MASK_LIGHT_MAP
 #define REFLCAP_MASK_CAMERA_MAP
 #define REFLCAP_MASK_TEXEL_OF_PIXEL
-#include "common/ray_triangle.glsl"
 #include "resample/masks_common.glsl"
 
 layout(local_size_x = 64, local_size_x_id = 0) in;
@@ -124,19 +123,13 @@ TapHit TapHitOf(vec3 origin, vec3 dir, ivec2 t, vec4 m) {
   float dist;
   vec3 b;
   TapHit h;
-  if (RayTrianglePlane(origin, dir, corners[3u * tri].position.xyz,
-                       corners[3u * tri + 1u].position.xyz, corners[3u * tri + 2u].position.xyz,
-                       dist, b) &&
-      dist > 0.0) {
-    MaskCorner c0 = corners[3u * tri], c1 = corners[3u * tri + 1u], c2 = corners[3u * tri + 2u];
-    vec3 n = b.x * c0.normal.xyz + b.y * c1.normal.xyz + b.z * c2.normal.xyz;
-    float len = length(n);
+  if (MaskRayMeetsTriangle(origin, dir, tri, dist, b)) {
+    MaskSurface hit = MaskSurfaceAt(tri, b);
+    float len = length(hit.n);
     // A degenerate interpolated normal (opposite corner normals) faces nothing, as the camera pass.
-    h.n_s = len > 0.0 ? n / len : vec3(0.0);
+    h.n_s = len > 0.0 ? hit.n / len : vec3(0.0);
     h.distance = dist;
-    h.texel = float(MaskTexelUnderUv(b.x * vec2(c0.position.w, c0.normal.w) +
-                                     b.y * vec2(c1.position.w, c1.normal.w) +
-                                     b.z * vec2(c2.position.w, c2.normal.w)));
+    h.texel = float(MaskTexelUnderUv(hit.uv));
     return h;
   }
   vec4 a = texelFetch(camera_normal_map, ivec3(t, 0), 0);
@@ -158,20 +151,12 @@ bool CameraOccluded(vec3 p, vec3 n_g, vec3 p_cam, float footprint, float tan_v) 
   float t_p;
   if (Pinhole()) {
     t = MapTexelOfXy(p_cam.xy / p_cam.z);
-    float yc = (float(t.y) - params.map_intrinsics.w) / params.map_intrinsics.y;
-    float xc = (float(t.x) - params.map_intrinsics.z - params.map_intrinsics_extra.x * yc) /
-               params.map_intrinsics.x;
-    origin = params.camera_centre.xyz;
-    dir = normalize(MaskTransform3(params.object_from_cam, vec3(xc, yc, 1.0), 0.0));
-    t_p = length(p - origin);
   } else {
-    float ps = params.intrinsics_extra.y;
     vec2 c = 0.5 * vec2(float(params.width - 1u), float(params.height - 1u));
-    t = ivec2(floor(p_cam.xy / ps + c + 0.5));
-    origin = MaskTransform3(params.object_from_cam, vec3((vec2(t) - c) * ps, 0.0), 1.0);
-    dir = -params.toward_cam.xyz;
-    t_p = p_cam.z;
+    t = ivec2(floor(p_cam.xy / params.intrinsics_extra.y + c + 0.5));
   }
+  MaskMapTexelRay(vec2(t), origin, dir);
+  t_p = Pinhole() ? length(p - origin) : p_cam.z;
   if (!InMap(t)) return false;
   vec4 m = texelFetch(camera_map, ivec3(t, 0), 0);
   if (!(m.z > 0.5)) return false;

@@ -78,6 +78,56 @@ vec3 MaskTransform3(vec4 rows[3], vec3 p, float w) {
   return vec3(dot(rows[0], q), dot(rows[1], q), dot(rows[2], q));
 }
 
+// The object-frame ray through camera-map texel centre `t` (centres at integer coordinates): the
+// map's pinhole intrinsics (the photograph's, or the undistorted grid's of a distorted camera;
+// vulkan_masks.cc CameraGrid) from the camera centre, or an orthographic camera's parallel ray
+// from the plane z = 0 (Camera::PixelRay's cx = (width - 1) / 2; the map is the photograph's grid).
+void MaskMapTexelRay(vec2 t, out vec3 origin, out vec3 dir) {
+  if ((params.flags & kMaskFlagPinhole) != 0u) {
+    float yc = (t.y - params.map_intrinsics.w) / params.map_intrinsics.y;
+    float xc = (t.x - params.map_intrinsics.z - params.map_intrinsics_extra.x * yc) /
+               params.map_intrinsics.x;
+    origin = params.camera_centre.xyz;
+    dir = normalize(MaskTransform3(params.object_from_cam, vec3(xc, yc, 1.0), 0.0));
+  } else {
+    float ps = params.intrinsics_extra.y;
+    vec2 c = 0.5 * vec2(float(params.map_width - 1u), float(params.map_height - 1u));
+    origin = MaskTransform3(params.object_from_cam, vec3((t - c) * ps, 0.0), 1.0);
+    dir = -params.toward_cam.xyz;
+  }
+}
+
+#ifdef REFLCAP_MASK_CORNERS
+#include "common/ray_triangle.glsl"
+
+// Where the ray (origin, dir) meets the plane of triangle `tri`, ahead of the origin: its distance
+// t and barycentrics b (common/ray_triangle.glsl). False for a ray parallel to the plane or
+// meeting it behind the origin.
+bool MaskRayMeetsTriangle(vec3 origin, vec3 dir, uint tri, out float t, out vec3 b) {
+  return RayTrianglePlane(origin, dir, corners[3u * tri].position.xyz,
+                          corners[3u * tri + 1u].position.xyz,
+                          corners[3u * tri + 2u].position.xyz, t, b) &&
+         t > 0.0;
+}
+
+// Triangle `tri`'s corners interpolated at barycentrics b: position, shading normal (not
+// normalised) and UV — as CastPixels interpolates them at Embree's hit.
+struct MaskSurface {
+  vec3 p;
+  vec3 n;
+  vec2 uv;
+};
+MaskSurface MaskSurfaceAt(uint tri, vec3 b) {
+  MaskCorner c0 = corners[3u * tri], c1 = corners[3u * tri + 1u], c2 = corners[3u * tri + 2u];
+  MaskSurface s;
+  s.p = b.x * c0.position.xyz + b.y * c1.position.xyz + b.z * c2.position.xyz;
+  s.n = b.x * c0.normal.xyz + b.y * c1.normal.xyz + b.z * c2.normal.xyz;
+  s.uv = b.x * vec2(c0.position.w, c0.normal.w) + b.y * vec2(c1.position.w, c1.normal.w) +
+         b.z * vec2(c2.position.w, c2.normal.w);
+  return s;
+}
+#endif  // REFLCAP_MASK_CORNERS
+
 // Unit direction from p towards the light and its distance (1 for a directional light, whose
 // irradiance does not fall off).
 vec3 ToLight(vec3 p, out float dist) {

@@ -572,10 +572,10 @@ TEST_F(VulkanBatch, EvidenceRenderedOnTheDeviceDecidesAsTheCpus) {
     const PixelEvidence cpu = MeasurePixelEvidence(**fitted, true);
     const PixelEvidence gpu = MeasurePixelEvidence(**fitted, true, on_device);
     const int pixel_model = cpu.box ? kAutoBoxSupersampling : 1;
-    const IndirectEvidence icpu =
-        MeasureIndirectEvidence(**fitted, *table_of(**fitted), 2, true, pixel_model);
+    const std::unique_ptr<IndirectLight> table = table_of(**fitted);
+    const IndirectEvidence icpu = MeasureIndirectEvidence(**fitted, *table, 2, true, pixel_model);
     const IndirectEvidence igpu =
-        MeasureIndirectEvidence(**fitted, *table_of(**fitted), 2, true, pixel_model, on_device);
+        MeasureIndirectEvidence(**fitted, *table, 2, true, pixel_model, on_device);
     std::printf("%s: pixel-model reduction cpu %.5f, device %.5f; interreflection: %zu / %zu "
                 "unlit pixels, error reduction cpu %.5f, device %.5f\n",
                 name.c_str(), cpu.reduction, gpu.reduction, icpu.pixels, igpu.pixels,
