@@ -42,6 +42,14 @@ namespace {
 // (ParallelFor), so a per-file thread pool would only oversubscribe the cores.
 constexpr int kExrThreads = 0;
 
+// zlib level of ZIP-compressed files: 1, not OpenEXR's default 4. Measured on the million preset's
+// outputs (one thread, OpenEXR 3.1): a 1024^2 RGB re-render writes in 0.046 s instead of 0.065 and
+// reads in 0.043 instead of 0.061, its 5-channel aux buffers 0.094 / 0.077 instead of 0.128 /
+// 0.105, a 1290^2 params.exr 0.68 / 0.44 instead of 0.88 / 0.50, for files 3-6 % larger. reflcap
+// writes its renders, aux buffers and maps once and reads them back at once (validate, render):
+// the time counts, the few percent of disk do not. Any reader decodes either level.
+constexpr int kExrZipLevel = 1;
+
 // Grows OpenEXR's global thread pool to `threads` (never shrinks it), for a caller that reads or
 // writes one large file while nothing else runs.
 void GrowGlobalPool(int threads) {
@@ -428,6 +436,7 @@ Status WriteExrImpl(const fs::path& path, const Image& image, const std::vector<
     try {
       Imf::Header header(image.width, image.height);
       header.compression() = Imf::ZIP_COMPRESSION;
+      header.zipCompressionLevel() = kExrZipLevel;
       Imf::FrameBuffer frame_buffer;
       for (int c = 0; c < image.channels; ++c) {
         header.channels().insert(names[c], Imf::Channel(pixel_type));
