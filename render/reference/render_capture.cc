@@ -804,6 +804,7 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         const auto t0 = std::chrono::steady_clock::now();
         Status s = write(k, *result);
         timings[k].write_s = SecondsSince(t0);
+        if (s.ok() && options.after_write) s = options.after_write(selected[k], *result);
         if (!s.ok()) {
           std::lock_guard<std::mutex> lock(mutex);
           if (write_error.ok()) write_error = s;
@@ -880,7 +881,8 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
         {"render_s", "from then until the last image was rendered"},
         {"write_s", "wall time spent writing files, summed over the writer threads (overlaps "
                      "rendering)"},
-        {"write_tail_s", "from the last image rendered until every file was written"},
+        {"write_tail_s", "from the last image rendered until every file was written (in reflcap "
+                         "run, also scored for validation)"},
         {"images[].render_s", "time since the previous image was rendered (a batch's images "
                               "arrive together)"}}}};
   if (fitted->height_field != nullptr) {

@@ -167,6 +167,10 @@ struct CaptureRenderOptions {
   // selected photographs (ShardRange over them, in capture order); render_report.json then
   // carries `shard` and MergeRenderParts joins the parts.
   Shard shard;
+  // Called by a writer thread once the files of capture image `index` are written, with the
+  // result they were written from (`reflcap run` scores it for validation while it is in memory:
+  // validate::StreamingValidation). An error stops the render as a write error does. Empty: none.
+  std::function<Status(size_t index, const RenderResult& result)> after_write;
   Status Validate() const;
 };
 

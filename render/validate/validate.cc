@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <future>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -356,17 +357,67 @@ void FlattenJson(const Json& j, const std::string& prefix, int depth,
   }
 }
 
-// Reads the photograph, re-render, masks and aux buffers of `e` and scores them into e->score
-// (figure data too when keep_figure_data). *aux_problem receives why the image has no aux buffers
-// (then it has no region breakdown), else stays empty.
+// An image's re-render as validation reads it: pixels, mask and aux buffers (aux empty, with
+// `aux_problem` saying why, when the image has none).
+struct Rendered {
+  Image pixels;
+  Image mask;
+  std::optional<Image> aux;
+  std::string aux_problem;
+};
+
+// Reads the re-render of `e` from its files in renders_dir.
+StatusOr<Rendered> ReadRendered(const fs::path& renders_dir, const Entry& e) {
+  Rendered r;
+  REFLCAP_ASSIGN_OR_RETURN(r.pixels, ReadExrRgb(renders_dir / e.render));
+  REFLCAP_ASSIGN_OR_RETURN(r.mask, ReadPng(renders_dir / e.mask));
+  std::error_code ec;
+  if (fs::is_regular_file(renders_dir / e.aux, ec)) {
+    r.aux = ReadAux(renders_dir / e.aux, &r.aux_problem);
+  } else {
+    r.aux_problem = StrCat((renders_dir / e.aux).string(), ": missing");
+  }
+  return r;
+}
+
+// What the files of `result` hold once render writes them (RenderCapture: WriteExr, WritePng,
+// WriteExrChannels): NaN as 0 and values beyond the float range clamped to it; the mask as its
+// 8-bit PNG reads back (only whether it exceeds 0.5 is used: exactly when the value is >= 0.5).
+Rendered AsWritten(const render::RenderResult& result) {
+  auto finite = [](const Image& image) {
+    Image out = image;
+    constexpr float kMax = std::numeric_limits<float>::max();
+    for (float& x : out.data) x = std::isnan(x) ? 0.0f : std::clamp(x, -kMax, kMax);
+    return out;
+  };
+  Rendered r;
+  r.pixels = finite(result.pixels);
+  r.mask = Image(result.mask.width, result.mask.height, 1, 0.0f);
+  for (size_t p = 0; p < r.mask.PixelCount(); ++p) {
+    // WritePng: lround(clamp(x, 0, 1) * 255), so the code is >= 128 (read back > 0.5) iff x >= 0.5.
+    r.mask.data[p] = result.mask.data[p * size_t(result.mask.channels)] >= 0.5f ? 1.0f : 0.0f;
+  }
+  if (result.aux.channels == int(render::AuxChannelNames().size())) {
+    r.aux = finite(result.aux);
+  } else {
+    r.aux_problem = "the re-render has no aux buffers";
+  }
+  return r;
+}
+
+// Scores the photograph of `e` against its re-render into e->score (figure data too when
+// keep_figure_data). `where` names the re-render in errors (a file, or "the re-render of X").
+// *aux_problem receives why the image has no aux buffers (then it has no region breakdown), else
+// stays empty.
 Status ScoreEntry(const Capture& capture, const fs::path& renders_dir,
                   const ValidateOptions& options, const std::optional<NoiseModel>& noise,
-                  bool keep_figure_data, Entry* entry, std::string* aux_problem) {
+                  bool keep_figure_data, const Rendered& rendered, Entry* entry,
+                  std::string* aux_problem) {
   Entry& e = *entry;
   const CaptureImage& image = capture.images[e.index];
   REFLCAP_ASSIGN_OR_RETURN(Image photo, ReadImageRgb(capture.Resolve(image.file)));
-  REFLCAP_ASSIGN_OR_RETURN(Image render, ReadExrRgb(renders_dir / e.render));
-  REFLCAP_ASSIGN_OR_RETURN(Image render_mask, ReadPng(renders_dir / e.mask));
+  const Image& render = rendered.pixels;
+  const Image& render_mask = rendered.mask;
   for (const auto& [name, img] : {std::pair<std::string, const Image*>{e.render, &render},
                                   {e.mask, &render_mask}}) {
     if (img->width != photo.width || img->height != photo.height) {
@@ -388,28 +439,31 @@ Status ScoreEntry(const Capture& capture, const fs::path& renders_dir,
   }
   e.geometric_pixels = 0;
   for (float v : geometric.data) e.geometric_pixels += v > 0.5f;
-  std::optional<Image> aux;
-  std::string problem;
-  std::error_code ec;
-  if (fs::is_regular_file(renders_dir / e.aux, ec)) {
-    aux = ReadAux(renders_dir / e.aux, &problem);
-    if (aux && (aux->width != photo.width || aux->height != photo.height)) {
-      problem = StrCat((renders_dir / e.aux).string(), ": wrong size");
-      aux.reset();
-    }
-  } else {
-    problem = StrCat((renders_dir / e.aux).string(), ": missing");
+  const Image* aux = rendered.aux ? &*rendered.aux : nullptr;
+  std::string problem = rendered.aux_problem;
+  if (aux != nullptr && (aux->width != photo.width || aux->height != photo.height)) {
+    problem = StrCat((renders_dir / e.aux).string(), ": wrong size");
+    aux = nullptr;
   }
-  if (!aux) *aux_problem = problem;
-  e.has_aux = aux.has_value();
+  if (aux == nullptr) *aux_problem = problem;
+  e.has_aux = aux != nullptr;
   size_t excluded = 0;
   const Image eval = EvaluationMask(geometric, photo, image.saturation,
                                     options.score.erode_px, &excluded);
   ScoreOptions score_options = options.score;
   score_options.keep_figure_data = keep_figure_data;
-  e.score = ScoreImage(photo, render, eval, aux ? &*aux : nullptr, noise, score_options);
+  e.score = ScoreImage(photo, render, eval, aux, noise, score_options);
   e.score.excluded_invalid = excluded;
   return OkStatus();
+}
+
+// ScoreEntry on the re-render's files.
+Status ScoreEntryFromFiles(const Capture& capture, const fs::path& renders_dir,
+                           const ValidateOptions& options, const std::optional<NoiseModel>& noise,
+                           bool keep_figure_data, Entry* entry, std::string* aux_problem) {
+  REFLCAP_ASSIGN_OR_RETURN(Rendered rendered, ReadRendered(renders_dir, *entry));
+  return ScoreEntry(capture, renders_dir, options, noise, keep_figure_data, rendered, entry,
+                    aux_problem);
 }
 
 }  // namespace
@@ -428,19 +482,43 @@ Status ValidateOptions::Validate() const {
   return OkStatus();
 }
 
-StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& renders_dir,
-                                        const fs::path& out_dir, const ValidateOptions& options) {
-  REFLCAP_RETURN_IF_ERROR(options.Validate());
-  const auto start = std::chrono::steady_clock::now();
-  // With the fit: what the worst pixels' texels are looked up in (mesh, atlas, status.exr, the
-  // store) loads while the images are scored; its status map serves the fit figures too.
-  std::future<StatusOr<std::unique_ptr<FitTexels>>> fit_texels;
-  if (!options.fit_dir.empty()) {
-    fit_texels = std::async(std::launch::async, [&capture, &options] {
-      return FitTexels::Load(capture, options.fit_dir, options.samples_dir);
-    });
-  }
+// What StreamingValidation holds between Start, Score and Finish.
+struct StreamingValidation::State {
+  State(const Capture& c, fs::path dir, ValidateOptions o)
+      : capture(c), renders_dir(std::move(dir)), options(std::move(o)) {}
+  const Capture& capture;
+  const fs::path renders_dir;
+  const ValidateOptions options;
   std::vector<Entry> entries;
+  std::vector<int64_t> entry_of_image;  // capture image -> entries index, -1 when not selected
+  std::optional<NoiseModel> noise;
+  std::future<StatusOr<std::unique_ptr<FitTexels>>> fit_texels;
+  size_t worst_shown = 0;
+  // Per entry: scored (from memory), its status; written only by the thread scoring that entry.
+  std::vector<char> scored;
+  std::vector<Status> errors;
+  std::atomic<size_t> missing_aux{0};
+  std::mutex log_mutex;
+
+  // ScoreEntry's aux problem, logged once per validation.
+  void NoteAuxProblem(const std::string& problem) {
+    if (problem.empty() || missing_aux++ != 0) return;
+    std::lock_guard<std::mutex> lock(log_mutex);
+    REFLCAP_LOG(kWarning) << problem << "; no region breakdown for such images";
+  }
+};
+
+StreamingValidation::StreamingValidation(std::unique_ptr<State> state) : state_(std::move(state)) {}
+StreamingValidation::~StreamingValidation() {
+  // The fit look-up data may still be loading: wait for it before the capture it reads goes.
+  if (state_ && state_->fit_texels.valid()) state_->fit_texels.wait();
+}
+
+StatusOr<std::unique_ptr<StreamingValidation>> StreamingValidation::Start(
+    const Capture& capture, const fs::path& renders_dir, const ValidateOptions& options) {
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  auto state = std::make_unique<State>(capture, renders_dir, options);
+  state->entry_of_image.assign(capture.images.size(), -1);
   for (size_t i = 0; i < capture.images.size(); ++i) {
     const CaptureImage& image = capture.images[i];
     if (!render::IsSelected(options.split, image.split)) continue;
@@ -450,47 +528,96 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
     e.mask = render::MaskPathFor(image.file);
     e.aux = render::AuxPathFor(image.file);
     e.key = FlatKey(render::ImageKey(image.file));
-    for (const std::string& f : {e.render, e.mask}) {
-      std::error_code ec;
-      if (!fs::is_regular_file(renders_dir / f, ec)) {
-        return NotFoundError((renders_dir / f).string(), ": missing (the re-render of ",
-                             image.file, "; run reflcap render with --split ",
-                             render::SplitSelectionName(options.split), ")");
-      }
-    }
-    entries.push_back(std::move(e));
+    state->entry_of_image[i] = int64_t(state->entries.size());
+    state->entries.push_back(std::move(e));
   }
-  if (entries.empty()) {
+  if (state->entries.empty()) {
     return FailedPreconditionError(capture.json_path.string(), ": no image in split \"",
                                    render::SplitSelectionName(options.split), "\"");
   }
   // Figures: the worst images (known after scoring; those not drawn yet are scored again for
-  // their figure data, below) and evenly spaced ones over the selection, at most the cap in all.
+  // their figure data, in Finish) and evenly spaced ones over the selection, at most the cap in
+  // all.
+  std::vector<Entry>& entries = state->entries;
   const size_t figure_cap = std::min(entries.size(), size_t(options.max_figures));
-  const size_t worst_shown = std::min(figure_cap, size_t(kWorstImagesShown));
-  const size_t spaced = figure_cap - worst_shown;
+  state->worst_shown = std::min(figure_cap, size_t(kWorstImagesShown));
+  const size_t spaced = figure_cap - state->worst_shown;
   for (size_t k = 0; k < spaced; ++k) entries[k * entries.size() / spaced].figure = true;
+  state->noise = NoiseModelFromGroundTruth(capture.ground_truth_json);
+  state->scored.assign(entries.size(), 0);
+  state->errors.assign(entries.size(), OkStatus());
+  // With the fit: what the worst pixels' texels are looked up in (mesh, atlas, status.exr, the
+  // store) loads while the images are scored; its status map serves the fit figures too.
+  if (!options.fit_dir.empty()) {
+    const State* s = state.get();
+    state->fit_texels = std::async(std::launch::async, [s] {
+      return FitTexels::Load(s->capture, s->options.fit_dir, s->options.samples_dir);
+    });
+  }
+  return std::unique_ptr<StreamingValidation>(new StreamingValidation(std::move(state)));
+}
 
-  const std::optional<NoiseModel> noise = NoiseModelFromGroundTruth(capture.ground_truth_json);
-  std::vector<Status> errors(entries.size());
-  std::atomic<size_t> missing_aux{0};
-  std::mutex log_mutex;
-  Progress progress("validate", int64_t(entries.size()));
-  ParallelFor(0, int64_t(entries.size()), 1, [&](int64_t b, int64_t e_end, int) {
-    for (int64_t k = b; k < e_end; ++k) {
-      Entry& e = entries[size_t(k)];
-      std::string problem;
-      errors[size_t(k)] =
-          ScoreEntry(capture, renders_dir, options, noise, e.figure, &e, &problem);
-      if (!problem.empty() && missing_aux++ == 0) {
-        std::lock_guard<std::mutex> lock(log_mutex);
-        REFLCAP_LOG(kWarning) << problem << "; no region breakdown for such images";
+Status StreamingValidation::Score(size_t index, const render::RenderResult& result) {
+  State& s = *state_;
+  if (index >= s.entry_of_image.size() || s.entry_of_image[index] < 0) return OkStatus();
+  const size_t k = size_t(s.entry_of_image[index]);
+  Entry& e = s.entries[k];
+  std::string problem;
+  Status status = ScoreEntry(s.capture, s.renders_dir, s.options, s.noise, e.figure,
+                             AsWritten(result), &e, &problem);
+  s.NoteAuxProblem(problem);
+  s.errors[k] = status;
+  s.scored[k] = 1;
+  return status;
+}
+
+StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& renders_dir,
+                                        const fs::path& out_dir, const ValidateOptions& options) {
+  REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<StreamingValidation> validation,
+                           StreamingValidation::Start(capture, renders_dir, options));
+  return validation->Finish(out_dir);
+}
+
+StatusOr<ValidateSummary> StreamingValidation::Finish(const fs::path& out_dir) {
+  State& st = *state_;
+  const Capture& capture = st.capture;
+  const fs::path& renders_dir = st.renders_dir;
+  const ValidateOptions& options = st.options;
+  std::vector<Entry>& entries = st.entries;
+  const std::optional<NoiseModel>& noise = st.noise;
+  const size_t worst_shown = st.worst_shown;
+  const auto start = std::chrono::steady_clock::now();
+  // The images not scored while they were rendered are read from their files.
+  std::vector<size_t> from_files;
+  for (size_t k = 0; k < entries.size(); ++k) {
+    REFLCAP_RETURN_IF_ERROR(st.errors[k]);
+    if (st.scored[k]) continue;
+    from_files.push_back(k);
+    const Entry& e = entries[k];
+    for (const std::string& f : {e.render, e.mask}) {
+      std::error_code ec;
+      if (!fs::is_regular_file(renders_dir / f, ec)) {
+        return NotFoundError((renders_dir / f).string(), ": missing (the re-render of ",
+                             capture.images[e.index].file, "; run reflcap render with --split ",
+                             render::SplitSelectionName(options.split), ")");
       }
+    }
+  }
+  const size_t scored_while_rendering = entries.size() - from_files.size();
+  Progress progress("validate", int64_t(from_files.size()));
+  ParallelFor(0, int64_t(from_files.size()), 1, [&](int64_t b, int64_t e_end, int) {
+    for (int64_t n = b; n < e_end; ++n) {
+      const size_t k = from_files[size_t(n)];
+      Entry& e = entries[k];
+      std::string problem;
+      st.errors[k] = ScoreEntryFromFiles(capture, renders_dir, options, noise, e.figure, &e,
+                                         &problem);
+      st.NoteAuxProblem(problem);
       progress.Advance();
     }
   }, options.threads);
   progress.Finish();
-  for (const Status& s : errors) REFLCAP_RETURN_IF_ERROR(s);
+  for (const Status& s : st.errors) REFLCAP_RETURN_IF_ERROR(s);
   // Rank by error: MSE / peak^2 (what PSNR reads), largest first; ties keep image order.
   std::vector<size_t> by_error(entries.size());
   for (size_t n = 0; n < entries.size(); ++n) by_error[n] = n;
@@ -520,7 +647,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
       again.aux = e.aux;
       std::string problem;
       rescore_errors[size_t(k)] =
-          ScoreEntry(capture, renders_dir, options, noise, true, &again, &problem);
+          ScoreEntryFromFiles(capture, renders_dir, options, noise, true, &again, &problem);
       e.score.photo_tm = std::move(again.score.photo_tm);
       e.score.render_tm = std::move(again.score.render_tm);
       e.score.error = std::move(again.score.error);
@@ -615,7 +742,7 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   std::vector<PixelTexel> worst_texels;
   std::string worst_texels_note;
   StatusOr<std::unique_ptr<FitTexels>> loaded_fit = UnavailableError("no fit folder given");
-  if (fit_texels.valid()) loaded_fit = fit_texels.get();
+  if (st.fit_texels.valid()) loaded_fit = st.fit_texels.get();
   if (!options.fit_dir.empty() && !worst_pixels.empty()) {
     std::vector<PixelQuery> queries;
     for (const ListedPixel& w : worst_pixels) {
@@ -847,7 +974,8 @@ StatusOr<ValidateSummary> RunValidation(const Capture& capture, const fs::path& 
   }
 
   const double total_s = SecondsSince(start);
-  Json timings = {{"score_s", score_s}, {"figures_s", figures_s}, {"total_s", total_s}};
+  Json timings = {{"score_s", score_s}, {"figures_s", figures_s}, {"total_s", total_s},
+                  {"images_scored_while_rendering", scored_while_rendering}};
   std::string render_timings;  // table rows
   std::string render_speed;    // summary cell
   if (auto text = ReadTextFile(renders_dir / "render_report.json"); text.ok()) {

@@ -18,11 +18,13 @@
 //   report.html               everything above on one page (relative links): summary, worst
 //                             images large, all figures, maps, then the tables
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 
 #include "engine/capture/capture.h"
 #include "engine/core/status.h"
+#include "render/reference/reference_renderer.h"
 #include "render/reference/render_capture.h"
 #include "render/validate/metrics.h"
 
@@ -67,10 +69,44 @@ struct ValidateSummary {
 
 // Scores every selected photograph against its re-render in `renders_dir` and writes the report
 // into `out_dir` (created if missing). NotFound names a missing render or mask; InvalidArgument a
-// size mismatch; FailedPrecondition when no image is selected.
+// size mismatch; FailedPrecondition when no image is selected. (StreamingValidation::Start, then
+// Finish.)
 StatusOr<ValidateSummary> RunValidation(const Capture& capture,
                                         const std::filesystem::path& renders_dir,
                                         const std::filesystem::path& out_dir,
                                         const ValidateOptions& options);
+
+// RunValidation in steps, so that images are scored while a render stage still holds them in
+// memory (`reflcap run`: CaptureRenderOptions::after_write), instead of decoding their files
+// again: Start, Score for each image as it is rendered (any thread, any order), Finish. The
+// report is the same as RunValidation's on the written files (the same floats: Score takes them
+// as the files hold them), except its timings (`images_scored_while_rendering`; score_s then
+// times only the images read from files). `capture` must outlive the object.
+class StreamingValidation {
+ public:
+  // Checks the options, selects the images and starts loading the fit's look-up data.
+  // FailedPrecondition when no image is selected.
+  static StatusOr<std::unique_ptr<StreamingValidation>> Start(
+      const Capture& capture, const std::filesystem::path& renders_dir,
+      const ValidateOptions& options);
+  ~StreamingValidation();
+  StreamingValidation(const StreamingValidation&) = delete;
+  StreamingValidation& operator=(const StreamingValidation&) = delete;
+
+  // Scores capture image `index` against `result`, its re-render as render writes it to
+  // renders_dir (pixels, mask, aux buffers). Once per image; images of different calls may be
+  // scored concurrently; an image outside the selection is ignored. Errors as RunValidation's
+  // (reading the photograph, size mismatch); Finish returns them too.
+  Status Score(size_t index, const render::RenderResult& result);
+
+  // Scores the images Score did not see from their files in renders_dir and writes the report
+  // into `out_dir`, as RunValidation. Call once.
+  StatusOr<ValidateSummary> Finish(const std::filesystem::path& out_dir);
+
+ private:
+  struct State;
+  explicit StreamingValidation(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
 
 }  // namespace reflcap::validate

@@ -176,6 +176,39 @@ TEST(VerbsCli, RenderThenValidatePrintsTheNoiseBound) {
   }
 }
 
+// `reflcap run` scores each holdout image while its re-render is in memory
+// (validate::StreamingValidation); the report must be the one `reflcap validate` makes from the
+// written files: the same metrics (every number, every worst pixel) and the same figures.
+TEST(VerbsCli, RunScoresWhileRenderingAsValidateDoesFromTheFiles) {
+  testing::ScratchDir dir;
+  const std::string cap = TinyCapture().string();
+  const fs::path run = dir / "run";
+  CliResult r = RunCli("run --quiet " + cap + " --out " + run.string(), dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunCli("validate --quiet " + cap + " " + (run / "renders").string() + " --out " +
+                 (dir / "again").string() + " --fit " + (run / "fit").string() + " --samples " +
+                 (run / "samples").string(),
+             dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto streamed = nlohmann::json::parse(ReadTextFile(run / "report/metrics.json").value());
+  auto from_files = nlohmann::json::parse(ReadTextFile(dir / "again/metrics.json").value());
+  const size_t images = streamed["images"].size();
+  ASSERT_GT(images, 0u);
+  EXPECT_EQ(streamed["timings"]["images_scored_while_rendering"].get<size_t>(), images);
+  EXPECT_EQ(from_files["timings"]["images_scored_while_rendering"].get<size_t>(), 0u);
+  streamed.erase("timings");
+  from_files.erase("timings");
+  EXPECT_EQ(streamed, from_files) << "metrics differ";
+  size_t figures = 0;
+  for (const auto& e : fs::directory_iterator(run / "report/figures")) {
+    const fs::path other = dir / "again/figures" / e.path().filename();
+    ASSERT_TRUE(fs::is_regular_file(other)) << other;
+    EXPECT_EQ(ReadTextFile(e.path()).value(), ReadTextFile(other).value()) << e.path();
+    ++figures;
+  }
+  EXPECT_GT(figures, 0u);
+}
+
 TEST(VerbsCli, ValidateNamesTheTexelBehindEachWorstPixel) {
   // resample -> fit -> render (one ray per pixel, direct light only) -> validate with the fit and
   // the store: every worst pixel names its texel, the model it ended with and its train samples.
