@@ -148,6 +148,10 @@ bool PngEncode(PngWriteState* state) {
     return false;
   }
   png_init_io(state->png, state->file);
+  // zlib level 1, not libpng's 6: validate's figures (three 1024-px panels each) write 37 % faster
+  // (million preset, 23 figures: 5.36 -> 3.39 s on 2 cores) for files 10 % larger; masks and maps
+  // of few distinct values compress about as well either way.
+  png_set_compression_level(state->png, 1);
   png_set_IHDR(state->png, state->info, state->width, state->height, state->bit_depth,
                state->color_type, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
                PNG_FILTER_TYPE_DEFAULT);
