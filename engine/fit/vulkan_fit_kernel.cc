@@ -65,34 +65,31 @@ StatusOr<TexelBuffer> TexelBuffer::Create(gpu::VkContext& ctx, uint64_t elements
   return t;
 }
 
-Status TexelBuffer::Upload(gpu::VkContext& ctx, gpu::CommandBuffer& cmd, const void* data,
-                           uint64_t bytes) {
+Status TexelBuffer::Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes) {
   if (bytes > bytes_) {
     return InvalidArgumentError("TexelBuffer::Upload: ", bytes, " bytes into ", bytes_);
   }
   if (bytes == 0) return OkStatus();
   if (mapped_ != nullptr) {
-    std::memcpy(mapped_, data, bytes);
+    gpu::CopyBytes(mapped_, data, bytes);
     return OkStatus();
   }
-  const uint64_t piece = std::min<uint64_t>(bytes, gpu::kStagingChunkBytes);
-  REFLCAP_ASSIGN_OR_RETURN(gpu::Buffer * staging, ctx.StagingBuffer(piece));
-  for (uint64_t done = 0; done < bytes; done += piece) {
-    const uint64_t n = std::min(piece, bytes - done);
-    std::memcpy(staging->mapped(), static_cast<const char*>(data) + done, n);
-    REFLCAP_RETURN_IF_ERROR(cmd.Begin());
-    const VkBufferCopy region{0, done, n};
-    vkCmdCopyBuffer(cmd.handle(), staging->handle(), buffer_, 1, &region);
-    VkMemoryBarrier barrier{};
-    barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
-    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    vkCmdPipelineBarrier(cmd.handle(), VK_PIPELINE_STAGE_TRANSFER_BIT,
-                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
-                         nullptr);
-    REFLCAP_RETURN_IF_ERROR(cmd.SubmitAndWait());
-  }
-  return OkStatus();
+  return gpu::UploadThroughStaging(
+      ctx, data, bytes, gpu::kStagingChunkBytes,
+      [this](gpu::CommandBuffer& cmd, const gpu::Buffer& staging, uint64_t staging_offset,
+             uint64_t done, uint64_t n) {
+        const VkBufferCopy region{staging_offset, done, n};
+        vkCmdCopyBuffer(cmd.handle(), staging.handle(), buffer_, 1, &region);
+        // The fit kernel reads the texels in later submissions of the same queue.
+        VkMemoryBarrier barrier{};
+        barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+        barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+        barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+        vkCmdPipelineBarrier(cmd.handle(), VK_PIPELINE_STAGE_TRANSFER_BIT,
+                             VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
+                             nullptr);
+        return OkStatus();
+      });
 }
 
 TexelBuffer::~TexelBuffer() { Release(); }

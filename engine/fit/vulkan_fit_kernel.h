@@ -37,8 +37,9 @@ class TexelBuffer {
   TexelBuffer& operator=(const TexelBuffer&) = delete;
 
   // Copies `bytes` bytes to the start of the buffer and waits until they are there: a memcpy when
-  // mapped, else through the context's staging buffer, one submission of `cmd` per 32 MiB.
-  Status Upload(gpu::VkContext& ctx, gpu::CommandBuffer& cmd, const void* data, uint64_t bytes);
+  // mapped, else through the context's staging ring (gpu::UploadThroughStaging: host copies over
+  // several threads overlapping the device's copies).
+  Status Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes);
 
   uint64_t elements() const { return elements_; }
   VkBufferView view() const { return view_; }

@@ -144,33 +144,60 @@ Status Download(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t
   return OkStatus();
 }
 
+namespace {
+
+// The staging ring of a transfer of `size` bytes (> 0): piece k of `piece` bytes goes through
+// slot k % slots of the context's staging buffer, each slot with its command buffer, so the host
+// copies into or out of one slot while the device copies the others.
+struct StagingRing {
+  uint64_t piece = 0, pieces = 0, slots = 0;
+  Buffer* staging = nullptr;
+  std::vector<CommandBuffer> cmd;
+
+  static StatusOr<StagingRing> Open(VkContext& ctx, uint64_t size, uint64_t staging_bytes) {
+    StagingRing r;
+    r.piece = std::min(size, staging_bytes);
+    r.pieces = (size + r.piece - 1) / r.piece;
+    r.slots = std::min<uint64_t>(r.pieces, kStagingSlots);
+    REFLCAP_ASSIGN_OR_RETURN(r.staging, ctx.StagingBuffer(r.piece * r.slots));
+    r.cmd.resize(size_t(r.slots));
+    for (CommandBuffer& c : r.cmd) {
+      REFLCAP_ASSIGN_OR_RETURN(c, CommandBuffer::Create(ctx));
+    }
+    return r;
+  }
+  CommandBuffer& CommandOf(uint64_t k) { return cmd[size_t(k % slots)]; }
+  uint64_t SlotOffset(uint64_t k) const { return (k % slots) * piece; }
+  char* SlotMemory(uint64_t k) const { return static_cast<char*>(staging->mapped()) + SlotOffset(k); }
+};
+
+}  // namespace
+
+Status UploadThroughStaging(VkContext& ctx, const void* src, uint64_t size, uint64_t staging_bytes,
+                            const RecordStagedCopy& record) {
+  if (staging_bytes == 0) return InvalidArgumentError("UploadStaged: staging_bytes is 0");
+  if (size == 0) return OkStatus();
+  REFLCAP_ASSIGN_OR_RETURN(StagingRing ring, StagingRing::Open(ctx, size, staging_bytes));
+  for (uint64_t k = 0; k < ring.pieces; ++k) {
+    CommandBuffer& c = ring.CommandOf(k);
+    const uint64_t done = k * ring.piece, n = std::min(ring.piece, size - done);
+    REFLCAP_RETURN_IF_ERROR(c.Wait());  // its previous copy has left the slot
+    CopyBytes(ring.SlotMemory(k), static_cast<const char*>(src) + done, n);
+    REFLCAP_RETURN_IF_ERROR(c.Begin());
+    REFLCAP_RETURN_IF_ERROR(record(c, *ring.staging, ring.SlotOffset(k), done, n));
+    REFLCAP_RETURN_IF_ERROR(c.Submit());
+  }
+  for (CommandBuffer& c : ring.cmd) REFLCAP_RETURN_IF_ERROR(c.Wait());
+  return OkStatus();
+}
+
 Status UploadStaged(VkContext& ctx, const void* src, uint64_t size, Buffer& dst,
                     uint64_t dst_offset, uint64_t staging_bytes) {
   REFLCAP_RETURN_IF_ERROR(CheckRange(dst, dst_offset, size, "UploadStaged"));
-  if (staging_bytes == 0) return InvalidArgumentError("UploadStaged: staging_bytes is 0");
-  if (size == 0) return OkStatus();
-  // Two halves of the staging buffer, each with its command buffer: the host fills one while the
-  // device copies the other.
-  const uint64_t piece = std::min(size, staging_bytes);
-  const int halves = size > piece ? 2 : 1;
-  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece * halves));
-  CommandBuffer cmd[2];
-  for (int h = 0; h < halves; ++h) {
-    REFLCAP_ASSIGN_OR_RETURN(cmd[h], CommandBuffer::Create(ctx));
-  }
-  int h = 0;
-  for (uint64_t done = 0; done < size; h = (h + 1) % halves) {
-    const uint64_t n = std::min(size - done, piece);
-    REFLCAP_RETURN_IF_ERROR(cmd[h].Wait());  // its previous copy has left the staging half
-    CopyBytes(static_cast<char*>(staging->mapped()) + h * piece,
-              static_cast<const char*>(src) + done, n);
-    REFLCAP_RETURN_IF_ERROR(cmd[h].Begin());
-    REFLCAP_RETURN_IF_ERROR(cmd[h].CopyBuffer(*staging, h * piece, dst, dst_offset + done, n));
-    REFLCAP_RETURN_IF_ERROR(cmd[h].Submit());
-    done += n;
-  }
-  for (int k = 0; k < halves; ++k) REFLCAP_RETURN_IF_ERROR(cmd[k].Wait());
-  return OkStatus();
+  return UploadThroughStaging(
+      ctx, src, size, staging_bytes,
+      [&](CommandBuffer& cmd, const Buffer& staging, uint64_t staging_offset, uint64_t done,
+          uint64_t n) { return cmd.CopyBuffer(staging, staging_offset, dst, dst_offset + done, n); });
 }
 
 Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size,
@@ -178,33 +205,23 @@ Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, ui
   REFLCAP_RETURN_IF_ERROR(CheckRange(src, src_offset, size, "DownloadStaged"));
   if (staging_bytes == 0) return InvalidArgumentError("DownloadStaged: staging_bytes is 0");
   if (size == 0) return OkStatus();
-  // The device copies piece k + 1 into one half of the staging buffer while the host copies
-  // piece k out of the other.
-  const uint64_t piece = std::min(size, staging_bytes);
-  const uint64_t pieces = (size + piece - 1) / piece;
-  const int halves = pieces > 1 ? 2 : 1;
-  REFLCAP_ASSIGN_OR_RETURN(Buffer * staging, ctx.StagingBuffer(piece * halves));
-  CommandBuffer cmd[2];
-  for (int h = 0; h < halves; ++h) {
-    REFLCAP_ASSIGN_OR_RETURN(cmd[h], CommandBuffer::Create(ctx));
-  }
+  // The device copies the next pieces into the other slots while the host copies piece k out.
+  REFLCAP_ASSIGN_OR_RETURN(StagingRing ring, StagingRing::Open(ctx, size, staging_bytes));
   auto start_copy = [&](uint64_t k) -> Status {
-    const int h = int(k % halves);
-    const uint64_t offset = k * piece;
-    REFLCAP_RETURN_IF_ERROR(cmd[h].Begin());
-    REFLCAP_RETURN_IF_ERROR(
-        cmd[h].CopyBuffer(src, src_offset + offset, *staging, h * piece, std::min(piece, size - offset)));
-    return cmd[h].Submit();
+    CommandBuffer& c = ring.CommandOf(k);
+    const uint64_t offset = k * ring.piece;
+    REFLCAP_RETURN_IF_ERROR(c.Begin());
+    REFLCAP_RETURN_IF_ERROR(c.CopyBuffer(src, src_offset + offset, *ring.staging,
+                                         ring.SlotOffset(k), std::min(ring.piece, size - offset)));
+    return c.Submit();
   };
-  REFLCAP_RETURN_IF_ERROR(start_copy(0));
-  for (uint64_t k = 0; k < pieces; ++k) {
-    if (k + 1 < pieces) REFLCAP_RETURN_IF_ERROR(start_copy(k + 1));
-    const int h = int(k % halves);
-    REFLCAP_RETURN_IF_ERROR(cmd[h].Wait());
-    const uint64_t offset = k * piece;
-    CopyBytes(static_cast<char*>(dst) + offset,
-              static_cast<const char*>(staging->mapped()) + h * piece,
-              std::min(piece, size - offset));
+  for (uint64_t k = 0; k < ring.slots; ++k) REFLCAP_RETURN_IF_ERROR(start_copy(k));
+  for (uint64_t k = 0; k < ring.pieces; ++k) {
+    REFLCAP_RETURN_IF_ERROR(ring.CommandOf(k).Wait());
+    const uint64_t offset = k * ring.piece;
+    CopyBytes(static_cast<char*>(dst) + offset, ring.SlotMemory(k),
+              std::min(ring.piece, size - offset));
+    if (k + ring.slots < ring.pieces) REFLCAP_RETURN_IF_ERROR(start_copy(k + ring.slots));
   }
   return OkStatus();
 }

@@ -16,6 +16,7 @@
 #include <vulkan/vulkan.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -56,10 +57,14 @@ class Buffer {
   void* mapped_ = nullptr;
 };
 
-// Bytes per staging copy when a buffer is not host-visible: uploads and downloads go through two
-// halves of a host buffer of this size each, the host copying one while the device copies the
-// other (PCIe DMA and host memcpy overlap).
-inline constexpr uint64_t kStagingChunkBytes = uint64_t{32} << 20;  // 32 MiB
+// Bytes per staging copy when a buffer is not host-visible: uploads and downloads go through a
+// ring of kStagingSlots pieces of this size in a host buffer, the host copying some while the
+// device copies the others (PCIe DMA and host memcpy overlap). With two 32 MiB halves a 64 MiB
+// transfer overlapped one piece's copy with the other's, no more (H200: 15.7 / 16.5 GB/s up /
+// down); with four 8 MiB slots only the first piece's host copy and the last one's device copy
+// stand alone. 32 MiB of staging in all, as before.
+inline constexpr uint64_t kStagingChunkBytes = uint64_t{8} << 20;  // 8 MiB
+inline constexpr int kStagingSlots = 4;
 // Host copies of at least kParallelCopyBytes are split into kCopyBlockBytes blocks over up to
 // kMaxCopyThreads threads: one core's memcpy (~10 GB/s) is below a PCIe 4/5 link's DMA rate;
 // eight cores saturate a socket's memory bandwidth, more only contend.
@@ -79,15 +84,24 @@ Status Upload(VkContext& ctx, const void* src, uint64_t size, Buffer& dst, uint6
 Status Download(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size, void* dst);
 
 // The staging paths of Upload and Download, for any buffer: through pieces of
-// min(size, staging_bytes) bytes (> 0) in two halves of the context's reusable staging buffer
-// (VkContext::StagingBuffer), one submission per piece, the host's copy of one piece overlapping
-// the device's of the next. Upload/Download use them with
+// min(size, staging_bytes) bytes (> 0) in up to kStagingSlots slots of the context's reusable
+// staging buffer (VkContext::StagingBuffer), one submission per piece, the host's copies of some
+// pieces overlapping the device's of others. Upload/Download use them with
 // kStagingChunkBytes when the buffer is not host-visible; tests call them directly because on
 // unified-memory devices (lavapipe) every buffer is.
 Status UploadStaged(VkContext& ctx, const void* src, uint64_t size, Buffer& dst,
                     uint64_t dst_offset, uint64_t staging_bytes);
 Status DownloadStaged(VkContext& ctx, const Buffer& src, uint64_t src_offset, uint64_t size,
                       void* dst, uint64_t staging_bytes);
+// UploadStaged's ring for a destination that is not a Buffer (a texel buffer): `record` records,
+// into a command buffer being recorded, the device's copy of `n` bytes from `staging` at
+// `staging_offset` to the destination at byte `done` of the upload (and any barrier its readers
+// need). Returns when every piece is there.
+class CommandBuffer;
+using RecordStagedCopy = std::function<Status(CommandBuffer& cmd, const Buffer& staging,
+                                              uint64_t staging_offset, uint64_t done, uint64_t n)>;
+Status UploadThroughStaging(VkContext& ctx, const void* src, uint64_t size, uint64_t staging_bytes,
+                            const RecordStagedCopy& record);
 
 // Makes *buffer a host-visible buffer of at least `bytes` (16 when bytes is 0: a binding needs a
 // buffer even when it is empty), reusing the current one when it is large enough.
