@@ -94,8 +94,10 @@ struct FitterConfig {
   Backend backend = Backend::kCpu;
   VulkanFitKernel kernel = VulkanFitKernel::kAuto;
   uint32_t cluster_size = 0;
+  bool staged = false;  // VulkanFitterOptions::map_device_records = false
   bool operator<(const FitterConfig& o) const {
-    return std::tie(backend, kernel, cluster_size) < std::tie(o.backend, o.kernel, o.cluster_size);
+    return std::tie(backend, kernel, cluster_size, staged) <
+           std::tie(o.backend, o.kernel, o.cluster_size, o.staged);
   }
 };
 std::map<FitterConfig, std::unique_ptr<Fitter>> g_fitters;
@@ -110,6 +112,7 @@ Fitter* GetFitter(const FitterConfig& config, std::string* error) {
     vulkan.device = device ? device : "";
     vulkan.kernel = config.kernel;
     vulkan.cluster_size = config.cluster_size;
+    vulkan.map_device_records = !config.staged;
     auto created = CreateFitter(config.backend, 0, vulkan);
     if (created.ok()) {
       g_fitters[config] = std::move(created).value();
@@ -217,7 +220,7 @@ void RunFits(benchmark::State& state, const FitterConfig& config, int texels, in
                             st.kernel == VulkanFitKernel::kClusters
                                 ? StrCat(" x", st.cluster_size, st.native_math ? ", native exp/log" : "")
                                 : std::string(),
-                            "]"));
+                            st.records_mapped ? ", records mapped" : ", records staged", "]"));
     }
   }
   if (backend != Backend::kVulkan) state.SetLabel(fitter->device());
@@ -237,6 +240,13 @@ void Texels(benchmark::State& state, const FitterConfig& config, int64_t texels)
 }
 void BM_FitTexelsBatchedCpu(benchmark::State& state) { Texels(state, {Backend::kCpu}, state.range(0)); }
 void BM_FitTexelsVulkan(benchmark::State& state) { Texels(state, {Backend::kVulkan}, state.range(0)); }
+// The same with the residual quads uploaded through the staging ring even where the device's
+// memory is host-visible (a discrete GPU's resizable BAR): which of the two is faster there.
+void BM_FitTexelsVulkanStaged(benchmark::State& state) {
+  FitterConfig config{Backend::kVulkan};
+  config.staged = true;
+  Texels(state, config, state.range(0));
+}
 void BM_FitTexelsCeres(benchmark::State& state) { Texels(state, {Backend::kCeres}, state.range(0)); }
 // The Vulkan fitter's kernels side by side at 10^6 texels: /kernel/cluster_size/texels, kernel
 // 0 = lanes, 1 = clusters (bench/RESULTS.md's GPU sweep; slow on lavapipe: run it on a GPU).
@@ -330,6 +340,8 @@ BENCHMARK(BM_FitCeres)->Arg(64)->Arg(16)->Arg(256)->Iterations(1)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 
 BENCHMARK(BM_FitTexelsVulkan)->Arg(1000)->Arg(10000)->Arg(100000)->Arg(1000000)
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+BENCHMARK(BM_FitTexelsVulkanStaged)->Arg(1000000)
     ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 BENCHMARK(BM_FitTexelsBatchedCpu)->Arg(1000)->Arg(10000)->Arg(100000)->Arg(1000000)
     ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);

@@ -323,6 +323,7 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       sum.kernel = st.kernel;
       sum.cluster_size = st.cluster_size;
       sum.native_math = st.native_math;
+      sum.records_mapped = st.records_mapped;
       sum.batches += st.batches;
       sum.dispatches += st.dispatches;
       sum.gpu_problems += st.gpu_problems;
@@ -658,6 +659,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
     report["vulkan"] = {{"kernel", VulkanFitKernelName(vulkan_stats.kernel)},
                         {"cluster_size", vulkan_stats.cluster_size},
                         {"native_math", vulkan_stats.native_math},
+                        {"records_mapped", vulkan_stats.records_mapped},
                         {"batches", vulkan_stats.batches},
                         {"dispatches", vulkan_stats.dispatches},
                         {"device_problems", vulkan_stats.gpu_problems},

@@ -778,6 +778,7 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
                                                 options_.map_device_records));
     }
     batches_[k].device_records = &records_[k];
+    stats_.records_mapped = records_[k].mapped() != nullptr;
   }
   // Batch k runs on the device while batch k - 1 is finished and batch k + 1 prepared on the CPU
   // (two host batches: k + 1 reuses k - 1's once it is finished).

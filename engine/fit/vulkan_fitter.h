@@ -108,6 +108,9 @@ struct VulkanFitStats {
   VulkanFitKernel kernel = VulkanFitKernel::kLanes;  // the kernel that ran
   uint32_t cluster_size = 0;         // invocations per problem (kClusters), else 0
   bool native_math = false;          // kClusters with the device's exp/log
+  // The residual quads went straight into mapped device memory (host-visible device-local
+  // memory: lavapipe, integrated GPUs, a discrete GPU's resizable BAR), not through staging.
+  bool records_mapped = false;
   uint64_t residual_evaluations = 0; // model + normal-equation updates of one residual, on the
                                      // device (the LM's unit of work)
   double device_seconds = 0;         // wall-clock time of the device's batches (upload, LM,
