@@ -20,12 +20,14 @@ std::vector<size_t> EvidenceImages(const Capture& capture, int count) {
   return out;
 }
 
-StatusOr<Image> ReadEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
-                                       const char* what) {
+namespace {
+
+// ReadEvidencePhotograph once `read` holds what reading the file gave.
+StatusOr<Image> CheckEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
+                                        StatusOr<Image> read, const char* what) {
   const CaptureImage& image = capture.images[index];
   const Camera& camera = capture.cameras[image.camera];
-  StatusOr<Image> read =
-      rendered.ok() ? ReadImageRgb(capture.Resolve(image.file)) : StatusOr<Image>(rendered);
+  if (!rendered.ok()) read = rendered;
   Status problem = read.status();
   if (problem.ok() && (read->width != camera.width || read->height != camera.height)) {
     problem = InvalidArgumentError(capture.Resolve(image.file).string(), ": ", read->width, "x",
@@ -38,6 +40,42 @@ StatusOr<Image> ReadEvidencePhotograph(const Capture& capture, size_t index, Sta
     return problem;
   }
   return read;
+}
+
+}  // namespace
+
+StatusOr<Image> ReadEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
+                                       const char* what) {
+  StatusOr<Image> read = rendered.ok()
+                             ? ReadImageRgb(capture.Resolve(capture.images[index].file))
+                             : StatusOr<Image>(rendered);
+  return CheckEvidencePhotograph(capture, index, rendered, std::move(read), what);
+}
+
+EvidencePhotographs::EvidencePhotographs(const Capture& capture, std::vector<size_t> indices)
+    : capture_(capture), indices_(std::move(indices)), reads_(indices_.size()) {
+  for (size_t k = 0; k < std::min(indices_.size(), kEvidenceReadAhead); ++k) Start(k);
+}
+
+EvidencePhotographs::~EvidencePhotographs() {
+  for (auto& read : reads_) {
+    if (read.valid()) read.wait();
+  }
+}
+
+void EvidencePhotographs::Start(size_t k) {
+  if (k >= indices_.size() || reads_[k].valid()) return;
+  const std::filesystem::path path = capture_.Resolve(capture_.images[indices_[k]].file);
+  reads_[k] = std::async(std::launch::async, [path] { return ReadImageRgb(path); });
+}
+
+StatusOr<Image> EvidencePhotographs::Take(size_t k, Status rendered, const char* what) {
+  REFLCAP_CHECK(k < indices_.size()) << "EvidencePhotographs::Take(" << k << ") of "
+                                     << indices_.size();
+  Start(k);
+  Start(k + kEvidenceReadAhead);  // the next read takes the place of this one
+  StatusOr<Image> read = reads_[k].get();
+  return CheckEvidencePhotograph(capture_, indices_[k], rendered, std::move(read), what);
 }
 
 bool UsablePixel(const float* p, const CaptureImage& image) {

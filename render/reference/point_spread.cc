@@ -100,12 +100,14 @@ PsfEvidence MeasurePsfEvidence(const FittedCapture& fitted, bool cast_shadows,
   PsfEvidence evidence;
   RenderOptions direct;
   direct.cast_shadows = cast_shadows;
-  for (const size_t index : EvidenceImages(capture, kPsfEvidenceImages)) {
+  const std::vector<size_t> indices = EvidenceImages(capture, kPsfEvidenceImages);
+  EvidencePhotographs photos(capture, indices);
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);
-    StatusOr<Image> read =
-        ReadEvidencePhotograph(capture, index, rendered.status(), "point-spread evidence");
+    StatusOr<Image> read = photos.Take(k, rendered.status(), "point-spread evidence");
     if (!read.ok()) {
       ++evidence.skipped;
       continue;

@@ -105,7 +105,10 @@ HeightFieldEvidence MeasureHeightFieldEvidence(const FittedCapture& fitted,
   HeightFieldEvidence evidence;
   RenderOptions direct;
   direct.aux_buffers = true;
-  for (const size_t index : EvidenceImages(capture, kHeightFieldEvidenceImages)) {
+  const std::vector<size_t> indices = EvidenceImages(capture, kHeightFieldEvidenceImages);
+  EvidencePhotographs photos(capture, indices);
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     const Light& light = capture.lights[image.light];
@@ -116,8 +119,7 @@ HeightFieldEvidence MeasureHeightFieldEvidence(const FittedCapture& fitted,
         ls.ok() ? RenderNormalMapImage(fitted.atlas, fitted.maps, camera, light, image.exposure_s,
                                        direct, &l1_field)
                 : ls;
-    StatusOr<Image> read =
-        ReadEvidencePhotograph(capture, index, l1.status(), "height-field evidence");
+    StatusOr<Image> read = photos.Take(k, l1.status(), "height-field evidence");
     if (!read.ok()) {
       ++evidence.skipped;
       continue;
@@ -194,12 +196,14 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   direct.cast_shadows = cast_shadows;
   direct.aux_buffers = true;
   direct.supersampling = box ? kPixelEvidenceSupersampling : 1;
-  for (const size_t index : EvidenceImages(capture, kIndirectEvidenceImages)) {
+  const std::vector<size_t> indices = EvidenceImages(capture, kIndirectEvidenceImages);
+  EvidencePhotographs photos(capture, indices);
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderEvidence(fitted, render, index, direct);
-    StatusOr<Image> read = ReadEvidencePhotograph(capture, index, rendered.status(),
-                                                  "interreflection evidence");
+    StatusOr<Image> read = photos.Take(k, rendered.status(), "interreflection evidence");
     if (!read.ok()) {
       ++evidence.skipped;
       continue;
@@ -258,14 +262,16 @@ PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadow
   RenderOptions point, box;
   point.cast_shadows = box.cast_shadows = cast_shadows;
   box.supersampling = kPixelEvidenceSupersampling;
-  for (const size_t index : EvidenceImages(capture, kPixelEvidenceImages)) {
+  const std::vector<size_t> indices = EvidenceImages(capture, kPixelEvidenceImages);
+  EvidencePhotographs photos(capture, indices);
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> at_centre = RenderEvidence(fitted, render, index, point);
     StatusOr<RenderResult> averaged =
         at_centre.ok() ? RenderEvidence(fitted, render, index, box) : at_centre.status();
-    StatusOr<Image> read =
-        ReadEvidencePhotograph(capture, index, averaged.status(), "pixel-model evidence");
+    StatusOr<Image> read = photos.Take(k, averaged.status(), "pixel-model evidence");
     if (!read.ok()) {
       ++evidence.skipped;
       continue;

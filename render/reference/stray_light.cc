@@ -120,12 +120,14 @@ StrayLight EstimateStrayLight(const FittedCapture& fitted, bool cast_shadows) {
   direct.cast_shadows = cast_shadows;
   direct.aux_buffers = true;
   int read = 0;
-  for (const size_t index : EvidenceImages(capture, int(capture.images.size()))) {
+  const std::vector<size_t> indices = EvidenceImages(capture, int(capture.images.size()));
+  EvidencePhotographs photos(capture, indices);
+  for (size_t k = 0; k < indices.size(); ++k) {
+    const size_t index = indices[k];
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);
-    StatusOr<Image> photo =
-        ReadEvidencePhotograph(capture, index, rendered.status(), "stray-light estimate");
+    StatusOr<Image> photo = photos.Take(k, rendered.status(), "stray-light estimate");
     if (!photo.ok()) {
       ++out.skipped;
       continue;

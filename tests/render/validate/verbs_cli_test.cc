@@ -209,6 +209,37 @@ TEST(VerbsCli, RunScoresWhileRenderingAsValidateDoesFromTheFiles) {
   EXPECT_GT(figures, 0u);
 }
 
+// The auto settings' evidence reads train photographs ahead of their renders
+// (render::EvidencePhotographs); one it cannot read is left out with a warning naming it, and
+// the render (of the holdout split, which does not need it) goes on.
+TEST(VerbsCli, RenderLeavesOutAnEvidencePhotographItCannotRead) {
+  testing::ScratchDir dir;
+  const fs::path cap = dir / "cap";
+  fs::copy(TinyCapture(), cap, fs::copy_options::recursive);
+  const auto capture = nlohmann::json::parse(ReadTextFile(cap / "capture.json").value());
+  std::string first_train;  // every evidence takes the first train photograph
+  for (const auto& image : capture["images"]) {
+    if (image["split"] == "train") {
+      first_train = image["file"];
+      break;
+    }
+  }
+  ASSERT_FALSE(first_train.empty());
+  testing::WriteText(cap / first_train, "not an OpenEXR file");
+  CliResult r = RunCli("render " + cap.string() + " " + (cap / "gt").string() + " --out " +
+                           (dir / "renders").string(),
+                       dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("pixel-model evidence leaves out"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("interreflection evidence leaves out"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(first_train), std::string::npos) << r.err;
+  const auto report =
+      nlohmann::json::parse(ReadTextFile(dir / "renders/render_report.json").value());
+  EXPECT_EQ(report["pixel_model"]["evidence"]["skipped_images"].get<int>(), 1);
+  EXPECT_EQ(report["indirect"]["evidence"]["skipped_images"].get<int>(), 1);
+  EXPECT_GT(report["pixel_model"]["evidence"]["images"].get<int>(), 0);
+}
+
 TEST(VerbsCli, ValidateNamesTheTexelBehindEachWorstPixel) {
   // resample -> fit -> render (one ray per pixel, direct light only) -> validate with the fit and
   // the store: every worst pixel names its texel, the model it ended with and its train samples.
