@@ -394,7 +394,7 @@ Rendered AsWritten(const render::RenderResult& result) {
   r.pixels = finite(result.pixels);
   r.mask = Image(result.mask.width, result.mask.height, 1, 0.0f);
   for (size_t p = 0; p < r.mask.PixelCount(); ++p) {
-    // WritePng: lround(clamp(x, 0, 1) * 255), so the code is >= 128 (read back > 0.5) iff x >= 0.5.
+    // WritePng: lround(clamp(x, 0, 1) * 255), a code >= 128 (read back > 0.5) iff x >= 0.5.
     r.mask.data[p] = result.mask.data[p * size_t(result.mask.channels)] >= 0.5f ? 1.0f : 0.0f;
   }
   if (result.aux.channels == int(render::AuxChannelNames().size())) {
@@ -405,10 +405,9 @@ Rendered AsWritten(const render::RenderResult& result) {
   return r;
 }
 
-// Scores the photograph of `e` against its re-render into e->score (figure data too when
-// keep_figure_data). `where` names the re-render in errors (a file, or "the re-render of X").
-// *aux_problem receives why the image has no aux buffers (then it has no region breakdown), else
-// stays empty.
+// Scores the photograph of `e` against its re-render `rendered` into e->score (figure data too
+// when keep_figure_data); errors name the re-render by its file in renders_dir. *aux_problem
+// receives why the image has no aux buffers (then it has no region breakdown), else stays empty.
 Status ScoreEntry(const Capture& capture, const fs::path& renders_dir,
                   const ValidateOptions& options, const std::optional<NoiseModel>& noise,
                   bool keep_figure_data, const Rendered& rendered, Entry* entry,
