@@ -422,6 +422,31 @@ TEST_F(VulkanFitterTest, ResumingAcrossDispatchesIsExact) {
   EXPECT_EQ(CountDifferent(reference, fits), 0);
 }
 
+// One batch whose residual quads (3.84 KB a texel at 64 samples) exceed a staging piece
+// (gpu::kStagingChunkBytes), uploaded through the staging ring in several pieces and slots: the
+// same bits as written straight into mapped memory.
+TEST_F(VulkanFitterTest, RecordsStagedInManyPiecesAreTheMappedOnes) {
+  const auto truth = SynthMaterialTexels(3000, 73);
+  SyntheticSampleOptions so;
+  so.samples_per_texel = 64;
+  so.seed = 73;
+  const TexelSampleChunk chunk = MakeSyntheticChunk(truth, so);
+  const FitOptions options;
+  VulkanFitterOptions staged_options;
+  staged_options.map_device_records = false;
+  auto staged = CreateVulkanFitter(TestDevice(staged_options));
+  ASSERT_TRUE(staged.ok()) << staged.status().ToString();
+  const auto reference = RunFitter(SharedVulkanFitter(), chunk, options);
+  ASSERT_TRUE(SharedVulkanFitter().last_stats().records_mapped) << "lavapipe maps device memory";
+  const auto uploaded = RunFitter(**staged, chunk, options);
+  const VulkanFitStats& stats = (*staged)->last_stats();
+  EXPECT_FALSE(stats.records_mapped);
+  EXPECT_EQ(stats.batches, 1u);
+  // 3000 texels x 48 quads x 80 bytes = 11.5 MB: two pieces of the ring at least.
+  EXPECT_GT(uint64_t(3000) * 48 * 80, gpu::kStagingChunkBytes);
+  EXPECT_EQ(CountDifferent(reference, uploaded), 0);
+}
+
 TEST_F(VulkanFitterTest, ManyBatchesAndTheCpuRouteChangeNothing) {
   const TexelSampleChunk chunk = MixedChunk(82);
   const FitOptions options;
