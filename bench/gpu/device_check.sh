@@ -3,8 +3,10 @@
 # ../shared/tools/gpu-bundle.sh (carry .gl and .gpu; the command is
 #   . .gpu/run-prologue.sh && bash bench/gpu/device_check.sh
 # ). Writes its logs and the million run's reports under $OUT (at most 8 files come back) and
-# prints a summary. ~4.5 min on an H200 host: tests ~70 s, synth ~30 s, run ~45 s, fits ~20 s,
-# benchmarks ~40 s. Record every number with the device line it prints.
+# prints a summary. 156 s on an H200 host at 01841b1: tests 60 s, synth 21 s, run 35 s, fits 11 s,
+# benchmarks 23 s (BM_FitTexelsVulkanStaged, added since, runs beside BM_FitTexelsVulkan: the
+# fit's records through the staging ring against mapped device memory). Record every number with
+# the device line it prints.
 set -u
 : "${BUILD:?source .gpu/run-prologue.sh first}" "${OUT:?run through the device tool (OUT unset)}"
 R=$BUILD/bin/reflcap
