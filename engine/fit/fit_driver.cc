@@ -330,6 +330,8 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       sum.cpu_problems += st.cpu_problems;
       sum.device_seconds += st.device_seconds;
       sum.prepare_seconds += st.prepare_seconds;
+      sum.prepare_texel_thread_seconds += st.prepare_texel_thread_seconds;
+      sum.prepare_layout_thread_seconds += st.prepare_layout_thread_seconds;
       sum.finish_seconds += st.finish_seconds;
       pass->used_vulkan = true;
     }
@@ -666,6 +668,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                         {"cpu_route_problems", vulkan_stats.cpu_problems},
                         {"device_s", vulkan_stats.device_seconds},
                         {"prepare_s", vulkan_stats.prepare_seconds},
+                        {"prepare_texel_thread_s", vulkan_stats.prepare_texel_thread_seconds},
+                        {"prepare_layout_thread_s", vulkan_stats.prepare_layout_thread_seconds},
                         {"finish_s", vulkan_stats.finish_seconds}};
   }
   if (select_model) {

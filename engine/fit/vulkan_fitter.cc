@@ -20,6 +20,7 @@
 #include "engine/fit/vulkan_fitter.h"
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <chrono>
 #include <cstring>
@@ -351,16 +352,26 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
       b->records.data() + 3 * section, b->records.data() + 4 * section};
   b->desc.resize(problems * desc_stride);
 
+  // Thread time in PrepareTexel and in the layout below, in nanoseconds (VulkanFitStats).
+  std::atomic<int64_t> texel_ns{0}, layout_ns{0};
   ParallelFor(
       0, texels, kTexelsPerTask,
       [&](int64_t t0, int64_t t1, int worker) {
         ProblemArena& arena = arenas_[worker];
+        int64_t task_texel_ns = 0, task_layout_ns = 0;
+        auto mark = std::chrono::steady_clock::now();
+        auto lap = [&mark](int64_t* ns) {
+          const auto now = std::chrono::steady_clock::now();
+          *ns += std::chrono::duration_cast<std::chrono::nanoseconds>(now - mark).count();
+          mark = now;
+        };
         for (int64_t t = t0; t < t1; ++t) {
           const uint32_t texel = begin + uint32_t(t);
           size_t cursor = 0;
           PreparedProblem* q = &b->problems[size_t(t) * per_texel];
           PrepareTexel(options, plan.layout, chunk.SamplesOf(texel), chunk.SampleCount(texel),
                        int(texel), &arena, &cursor, q);
+          lap(&task_texel_ns);
           // A texel larger than a whole batch (alone in its batch, CutBatches) stays on the CPU.
           const bool fits_a_batch = plan.FitsABatch(chunk.SampleCount(texel));
           uint64_t quad = b->quad[t];  // the texel's next free device quad
@@ -419,9 +430,14 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
             view.y = section_of[3] + first;
             view.sw = section_of[4] + first;
           }
+          lap(&task_layout_ns);
         }
+        texel_ns += task_texel_ns;
+        layout_ns += task_layout_ns;
       },
       plan.workers);
+  stats_.prepare_texel_thread_seconds += double(texel_ns) * 1e-9;
+  stats_.prepare_layout_thread_seconds += double(layout_ns) * 1e-9;
 
   b->queue.clear();
   for (size_t i = 0; i < problems; ++i) {

@@ -116,6 +116,12 @@ struct VulkanFitStats {
   double device_seconds = 0;         // wall-clock time of the device's batches (upload, LM,
                                      // download), overlapped with CPU preparation
   double prepare_seconds = 0;        // wall-clock time of the host's PrepareTexel passes
+  // Of those passes, summed over the worker threads: PrepareTexel itself, and laying its
+  // residuals out for the device and for FinishProblem (the device quads, into mapped device
+  // memory when records_mapped; and the CPU route's solves). Which of the two sets
+  // prepare_seconds on a GPU.
+  double prepare_texel_thread_seconds = 0;
+  double prepare_layout_thread_seconds = 0;
   double finish_seconds = 0;         // wall-clock time of the host's FinishProblem passes
 };
 
