@@ -38,6 +38,7 @@
 #include "engine/core/parallel.h"
 #include "engine/fit/fitter.h"
 #include "engine/fit/lobe_transfer.h"
+#include "engine/fit/problem.h"
 #include "engine/fit/synthetic_samples.h"
 #include "engine/fit/vulkan_fitter.h"
 #ifdef REFLCAP_HAVE_DEVICE_PEAK
@@ -253,6 +254,36 @@ void BM_FitTexelsVulkanStaged(benchmark::State& state) {
   Texels(state, config, state.range(0));
 }
 void BM_FitTexelsCeres(benchmark::State& state) { Texels(state, {Backend::kCeres}, state.range(0)); }
+// The host's per-texel preparation alone (problem.h PrepareTexel: masking, normalisation,
+// classification, start values) on one thread, 62,500 texels x 64 samples, aniso, one lobe: what
+// every backend does before its LM (BM_FitTexelsVulkan's prepare_s on a GPU).
+void BM_PrepareTexel(benchmark::State& state) {
+  const Data& d = GetData(kStreamChunkTexels, 64);
+  const FitOptions options;
+  const ProblemLayout layout{options.lobe_model, options.lobes};
+  ProblemArena arena;
+  uint64_t max_samples = 1;
+  for (uint32_t t = 0; t < d.chunk.texel_count; ++t) {
+    max_samples = std::max<uint64_t>(max_samples, d.chunk.SampleCount(t));
+  }
+  arena.Reserve(3 * max_samples, max_samples);
+  std::vector<PreparedProblem> problems(size_t(ProblemsPerTexel(layout.model)));
+  for (auto _ : state) {
+    for (uint32_t t = 0; t < d.chunk.texel_count; ++t) {
+      size_t cursor = 0;
+      PrepareTexel(options, layout, d.chunk.SamplesOf(t), d.chunk.SampleCount(t), int(t), &arena,
+                   &cursor, problems.data());
+      benchmark::DoNotOptimize(problems.data());
+    }
+  }
+  state.counters["texels_per_second"] = benchmark::Counter(
+      double(d.chunk.texel_count) * double(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["us_per_texel"] = benchmark::Counter(
+      double(d.chunk.texel_count) * double(state.iterations()),
+      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_PrepareTexel)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // The Vulkan fitter's kernels side by side at 10^6 texels: /kernel/cluster_size/texels, kernel
 // 0 = lanes, 1 = clusters (bench/RESULTS.md's GPU sweep; slow on lavapipe: run it on a GPU).
 void BM_FitVulkanKernel(benchmark::State& state) {
