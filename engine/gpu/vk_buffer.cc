@@ -175,7 +175,7 @@ struct StagingRing {
 
 Status UploadThroughStaging(VkContext& ctx, const void* src, uint64_t size, uint64_t staging_bytes,
                             const RecordStagedCopy& record) {
-  if (staging_bytes == 0) return InvalidArgumentError("UploadStaged: staging_bytes is 0");
+  if (staging_bytes == 0) return InvalidArgumentError("UploadThroughStaging: staging_bytes is 0");
   if (size == 0) return OkStatus();
   REFLCAP_ASSIGN_OR_RETURN(StagingRing ring, StagingRing::Open(ctx, size, staging_bytes));
   for (uint64_t k = 0; k < ring.pieces; ++k) {

@@ -20,38 +20,6 @@ std::vector<size_t> EvidenceImages(const Capture& capture, int count) {
   return out;
 }
 
-namespace {
-
-// ReadEvidencePhotograph once `read` holds what reading the file gave.
-StatusOr<Image> CheckEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
-                                        StatusOr<Image> read, const char* what) {
-  const CaptureImage& image = capture.images[index];
-  const Camera& camera = capture.cameras[image.camera];
-  if (!rendered.ok()) read = rendered;
-  Status problem = read.status();
-  if (problem.ok() && (read->width != camera.width || read->height != camera.height)) {
-    problem = InvalidArgumentError(capture.Resolve(image.file).string(), ": ", read->width, "x",
-                                   read->height, " pixels, but camera \"", camera.id, "\" is ",
-                                   camera.width, "x", camera.height);
-  }
-  if (!problem.ok()) {
-    REFLCAP_LOG(kWarning) << "render: " << what << " leaves out images[" << index
-                          << "]: " << problem.message();
-    return problem;
-  }
-  return read;
-}
-
-}  // namespace
-
-StatusOr<Image> ReadEvidencePhotograph(const Capture& capture, size_t index, Status rendered,
-                                       const char* what) {
-  StatusOr<Image> read = rendered.ok()
-                             ? ReadImageRgb(capture.Resolve(capture.images[index].file))
-                             : StatusOr<Image>(rendered);
-  return CheckEvidencePhotograph(capture, index, rendered, std::move(read), what);
-}
-
 EvidencePhotographs::EvidencePhotographs(const Capture& capture, std::vector<size_t> indices)
     : capture_(capture), indices_(std::move(indices)), reads_(indices_.size()) {
   for (size_t k = 0; k < std::min(indices_.size(), kEvidenceReadAhead); ++k) Start(k);
@@ -75,7 +43,22 @@ StatusOr<Image> EvidencePhotographs::Take(size_t k, Status rendered, const char*
   Start(k);
   Start(k + kEvidenceReadAhead);  // the next read takes the place of this one
   StatusOr<Image> read = reads_[k].get();
-  return CheckEvidencePhotograph(capture_, indices_[k], rendered, std::move(read), what);
+  const size_t index = indices_[k];
+  const CaptureImage& image = capture_.images[index];
+  const Camera& camera = capture_.cameras[image.camera];
+  if (!rendered.ok()) read = rendered;
+  Status problem = read.status();
+  if (problem.ok() && (read->width != camera.width || read->height != camera.height)) {
+    problem = InvalidArgumentError(capture_.Resolve(image.file).string(), ": ", read->width, "x",
+                                   read->height, " pixels, but camera \"", camera.id, "\" is ",
+                                   camera.width, "x", camera.height);
+  }
+  if (!problem.ok()) {
+    REFLCAP_LOG(kWarning) << "render: " << what << " leaves out images[" << index
+                          << "]: " << problem.message();
+    return problem;
+  }
+  return read;
 }
 
 bool UsablePixel(const float* p, const CaptureImage& image) {

@@ -100,10 +100,9 @@ PsfEvidence MeasurePsfEvidence(const FittedCapture& fitted, bool cast_shadows,
   PsfEvidence evidence;
   RenderOptions direct;
   direct.cast_shadows = cast_shadows;
-  const std::vector<size_t> indices = EvidenceImages(capture, kPsfEvidenceImages);
-  EvidencePhotographs photos(capture, indices);
-  for (size_t k = 0; k < indices.size(); ++k) {
-    const size_t index = indices[k];
+  EvidencePhotographs photos(capture, EvidenceImages(capture, kPsfEvidenceImages));
+  for (size_t k = 0; k < photos.size(); ++k) {
+    const size_t index = photos.index(k);
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);

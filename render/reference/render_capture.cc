@@ -105,10 +105,9 @@ HeightFieldEvidence MeasureHeightFieldEvidence(const FittedCapture& fitted,
   HeightFieldEvidence evidence;
   RenderOptions direct;
   direct.aux_buffers = true;
-  const std::vector<size_t> indices = EvidenceImages(capture, kHeightFieldEvidenceImages);
-  EvidencePhotographs photos(capture, indices);
-  for (size_t k = 0; k < indices.size(); ++k) {
-    const size_t index = indices[k];
+  EvidencePhotographs photos(capture, EvidenceImages(capture, kHeightFieldEvidenceImages));
+  for (size_t k = 0; k < photos.size(); ++k) {
+    const size_t index = photos.index(k);
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     const Light& light = capture.lights[image.light];
@@ -196,10 +195,9 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   direct.cast_shadows = cast_shadows;
   direct.aux_buffers = true;
   direct.supersampling = box ? kPixelEvidenceSupersampling : 1;
-  const std::vector<size_t> indices = EvidenceImages(capture, kIndirectEvidenceImages);
-  EvidencePhotographs photos(capture, indices);
-  for (size_t k = 0; k < indices.size(); ++k) {
-    const size_t index = indices[k];
+  EvidencePhotographs photos(capture, EvidenceImages(capture, kIndirectEvidenceImages));
+  for (size_t k = 0; k < photos.size(); ++k) {
+    const size_t index = photos.index(k);
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderEvidence(fitted, render, index, direct);
@@ -262,10 +260,9 @@ PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadow
   RenderOptions point, box;
   point.cast_shadows = box.cast_shadows = cast_shadows;
   box.supersampling = kPixelEvidenceSupersampling;
-  const std::vector<size_t> indices = EvidenceImages(capture, kPixelEvidenceImages);
-  EvidencePhotographs photos(capture, indices);
-  for (size_t k = 0; k < indices.size(); ++k) {
-    const size_t index = indices[k];
+  EvidencePhotographs photos(capture, EvidenceImages(capture, kPixelEvidenceImages));
+  for (size_t k = 0; k < photos.size(); ++k) {
+    const size_t index = photos.index(k);
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> at_centre = RenderEvidence(fitted, render, index, point);

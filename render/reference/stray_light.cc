@@ -120,10 +120,9 @@ StrayLight EstimateStrayLight(const FittedCapture& fitted, bool cast_shadows) {
   direct.cast_shadows = cast_shadows;
   direct.aux_buffers = true;
   int read = 0;
-  const std::vector<size_t> indices = EvidenceImages(capture, int(capture.images.size()));
-  EvidencePhotographs photos(capture, indices);
-  for (size_t k = 0; k < indices.size(); ++k) {
-    const size_t index = indices[k];
+  EvidencePhotographs photos(capture, EvidenceImages(capture, int(capture.images.size())));
+  for (size_t k = 0; k < photos.size(); ++k) {
+    const size_t index = photos.index(k);
     const CaptureImage& image = capture.images[index];
     const Camera& camera = capture.cameras[image.camera];
     StatusOr<RenderResult> rendered = RenderCaptureImage(fitted, index, direct);
