@@ -4,7 +4,8 @@
 #   . .gpu/run-prologue.sh && bash bench/gpu/device_check.sh
 # ). Writes its logs and the million run's reports under $OUT (at most 8 files come back) and
 # prints a summary. 156 s on an H200 host at 01841b1: tests 60 s, synth 21 s, run 35 s, fits 11 s,
-# benchmarks 23 s (BM_FitTexelsVulkanStaged, added since, runs beside BM_FitTexelsVulkan: the
+# benchmarks 23 s (since then: the fit at 4 and 8 threads, ~20 s; 64 MiB transfers over 4-32 MiB
+# pieces) (BM_FitTexelsVulkanStaged, added since, runs beside BM_FitTexelsVulkan: the
 # fit's records through the staging ring against mapped device memory). Record every number with
 # the device line it prints.
 set -u
@@ -13,6 +14,7 @@ R=$BUILD/bin/reflcap
 T0=$(date +%s)
 stamp() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | tee "$OUT/device.txt"
+{ nproc; lscpu 2>/dev/null | grep -E "Model name|Thread|Core|Socket|MHz"; } | tee -a "$OUT/device.txt"
 
 # 1. Every test, one process each (a teardown crash shows here), plus the masks' figures.
 timeout 240 ctest --test-dir "$BUILD" -j16 --timeout 150 -E layering --output-on-failure \
@@ -51,6 +53,19 @@ stamp "run done"
 for b in vulkan cpu; do
   { time "$R" fit /tmp/mil_run/samples --out /tmp/fit_$b --backend $b --quiet ; } 2>&1 | grep real
 done
+# How the fit's stages scale with the host's threads (serial parts show as stages that do not
+# shrink from 4 to 16 threads).
+for th in 4 8; do
+  "$R" fit /tmp/mil_run/samples --out /tmp/fit_t$th --backend vulkan --threads $th --quiet > /dev/null 2>&1
+done
+python3 - "$OUT" <<'PY' | tee "$OUT/fit_threads.txt"
+import json, sys
+rows = {th: json.load(open(p))["timings_s"] for th, p in
+        (("4", "/tmp/fit_t4/fit_report.json"), ("8", "/tmp/fit_t8/fit_report.json"),
+         ("16", "/tmp/fit_vulkan/fit_report.json"))}
+for k in rows["16"]:
+    print(f"{k:26s}" + "".join(f" {rows[t].get(k, float('nan')):8.3f}" for t in ("4", "8", "16")))
+PY
 stamp "fits done"
 
 # 3. Micro-benchmarks: fits/s over 10^6 texels, render batches, transfers.

@@ -131,18 +131,20 @@ BENCHMARK(BM_EmptyDispatch)
 
 enum class Direction { kUpload, kDownload };
 
+// range(0): MiB moved; for the staged paths range(1): MiB per staging piece (the ring's slot).
 void Transfer(benchmark::State& state, Direction direction, bool staged) {
   const uint64_t bytes = static_cast<uint64_t>(state.range(0)) * kMiB;
+  const uint64_t piece = staged ? static_cast<uint64_t>(state.range(1)) * kMiB : 0;
   StatusOr<Buffer> buffer = Buffer::Create(*g_ctx, bytes, MemoryKind::kDevice);
   if (Failed(state, buffer.status())) return;
   std::vector<uint8_t> host(bytes, 1);
   for (auto _ : state) {
     Status s;
     if (direction == Direction::kUpload) {
-      s = staged ? UploadStaged(*g_ctx, host.data(), bytes, *buffer, 0, kStagingChunkBytes)
+      s = staged ? UploadStaged(*g_ctx, host.data(), bytes, *buffer, 0, piece)
                  : Upload(*g_ctx, host.data(), bytes, *buffer);
     } else {
-      s = staged ? DownloadStaged(*g_ctx, *buffer, 0, bytes, host.data(), kStagingChunkBytes)
+      s = staged ? DownloadStaged(*g_ctx, *buffer, 0, bytes, host.data(), piece)
                  : Download(*g_ctx, *buffer, 0, bytes, host.data());
     }
     if (Failed(state, s)) return;
@@ -159,8 +161,17 @@ void BM_UploadStaged(benchmark::State& state) { Transfer(state, Direction::kUplo
 void BM_DownloadStaged(benchmark::State& state) { Transfer(state, Direction::kDownload, true); }
 BENCHMARK(BM_Upload)->Arg(1)->Arg(16)->Arg(64)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Download)->Arg(1)->Arg(16)->Arg(64)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_UploadStaged)->Arg(16)->Arg(64)->UseRealTime()->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_DownloadStaged)->Arg(16)->Arg(64)->UseRealTime()->Unit(benchmark::kMillisecond);
+// Staged: 16 and 64 MiB through the default pieces (kStagingChunkBytes), and 64 MiB through
+// other piece sizes, to choose the default on a GPU (kStagingSlots slots either way).
+void StagedArgs(benchmark::internal::Benchmark* b) {
+  const int64_t chunk = int64_t(kStagingChunkBytes / kMiB);
+  b->Args({16, chunk})->Args({64, chunk});
+  for (int64_t piece : {4, 8, 16, 32}) {
+    if (piece != chunk) b->Args({64, piece});
+  }
+}
+BENCHMARK(BM_UploadStaged)->Apply(StagedArgs)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_DownloadStaged)->Apply(StagedArgs)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 void BM_DeviceCopy(benchmark::State& state) {
   const uint64_t bytes = static_cast<uint64_t>(state.range(0)) * kMiB;

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "engine/core/parallel.h"
+#include "engine/core/worker_pool.h"
 #include "engine/gpu/vk_commands.h"
 #include "engine/gpu/vk_status.h"
 
@@ -107,21 +108,32 @@ void Buffer::Release() {
   size_ = 0;
 }
 
+namespace {
+
+// The threads of CopyBytes: started on first use and kept for the process's life. A staged
+// transfer copies a piece every few hundred microseconds at PCIe speed, and ParallelFor starts
+// its threads on every call: with them, the ring of 8 MiB pieces measured 9.3 GB/s up on an H200
+// where two 32 MiB pieces had measured 15.7. Never destroyed: its idle workers end with the
+// process, and no static destructor can find it gone.
+WorkerPool& CopyPool() {
+  static WorkerPool* const pool =
+      new WorkerPool(std::max(1, std::min(HardwareThreads(), kMaxCopyThreads) - 1));
+  return *pool;
+}
+
+}  // namespace
+
 void CopyBytes(void* dst, const void* src, uint64_t size) {
-  if (size < kParallelCopyBytes) {
+  if (size < kParallelCopyBytes || HardwareThreads() < 2) {
     std::memcpy(dst, src, size);
     return;
   }
   const int64_t blocks = int64_t((size + kCopyBlockBytes - 1) / kCopyBlockBytes);
-  ParallelFor(
-      0, blocks, 1,
-      [&](int64_t b0, int64_t b1, int) {
-        const uint64_t begin = uint64_t(b0) * kCopyBlockBytes;
-        const uint64_t end = std::min(size, uint64_t(b1) * kCopyBlockBytes);
-        std::memcpy(static_cast<char*>(dst) + begin, static_cast<const char*>(src) + begin,
-                    end - begin);
-      },
-      std::min(HardwareThreads(), kMaxCopyThreads));
+  CopyPool().ParallelFor(blocks, [&](int64_t b) {
+    const uint64_t begin = uint64_t(b) * kCopyBlockBytes;
+    const uint64_t end = std::min(size, begin + kCopyBlockBytes);
+    std::memcpy(static_cast<char*>(dst) + begin, static_cast<const char*>(src) + begin, end - begin);
+  });
 }
 
 Status Upload(VkContext& ctx, const void* src, uint64_t size, Buffer& dst, uint64_t dst_offset) {

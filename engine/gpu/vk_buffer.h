@@ -66,8 +66,9 @@ class Buffer {
 inline constexpr uint64_t kStagingChunkBytes = uint64_t{8} << 20;  // 8 MiB
 inline constexpr int kStagingSlots = 4;
 // Host copies of at least kParallelCopyBytes are split into kCopyBlockBytes blocks over up to
-// kMaxCopyThreads threads: one core's memcpy (~10 GB/s) is below a PCIe 4/5 link's DMA rate;
-// eight cores saturate a socket's memory bandwidth, more only contend.
+// kMaxCopyThreads threads (the caller and a pool kept for the process): one core's memcpy
+// (~10 GB/s) is below a PCIe 4/5 link's DMA rate; eight cores saturate a socket's memory
+// bandwidth, more only contend.
 inline constexpr uint64_t kParallelCopyBytes = uint64_t{4} << 20;
 inline constexpr uint64_t kCopyBlockBytes = uint64_t{1} << 20;
 inline constexpr int kMaxCopyThreads = 8;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <numeric>
+#include <thread>
 #include <vector>
 
 #include "engine/gpu/chunking.h"
@@ -58,6 +59,46 @@ TEST_F(BufferTest, RoundTripsHostDataThroughEveryPath) {
       EXPECT_EQ(back, data2) << "size " << size;
     }
   }
+}
+
+// Copies of at least kParallelCopyBytes go through the process's copy pool in kCopyBlockBytes
+// blocks: sizes that end inside a block, and four threads copying at once (the pool is shared by
+// every caller), must each get exactly their bytes.
+TEST(CopyBytesTest, LargeCopiesFromSeveralThreadsAtOnceAreExact) {
+  const std::vector<size_t> sizes = {size_t(kParallelCopyBytes), size_t(kParallelCopyBytes) + 1,
+                                     size_t(9 * kCopyBlockBytes) - 3};
+  std::vector<std::thread> callers;
+  std::vector<int> mismatches(4, -1);
+  for (int c = 0; c < 4; ++c) {
+    callers.emplace_back([&, c] {
+      int bad = 0;
+      for (int repeat = 0; repeat < 3; ++repeat) {
+        for (size_t size : sizes) {
+          const std::vector<uint8_t> from = Pattern(size, uint32_t(size) + 7u * uint32_t(c) + repeat);
+          std::vector<uint8_t> to(size + 2, 0xEE);
+          CopyBytes(to.data() + 1, from.data(), size);
+          bad += !std::equal(from.begin(), from.end(), to.begin() + 1);
+          bad += to.front() != 0xEE || to.back() != 0xEE;  // nothing written outside
+        }
+      }
+      mismatches[size_t(c)] = bad;
+    });
+  }
+  for (std::thread& t : callers) t.join();
+  EXPECT_EQ(mismatches, std::vector<int>(4, 0));
+}
+
+// Staged transfers whose pieces are large enough for the parallel host copy.
+TEST_F(BufferTest, RoundTripsThroughStagingPiecesCopiedInParallel) {
+  const uint64_t piece = kParallelCopyBytes + kCopyBlockBytes / 2;  // ends inside a block
+  const size_t size = size_t(3 * piece + 12345);  // four pieces, the last one short
+  StatusOr<Buffer> buffer = Buffer::Create(ctx(), size, MemoryKind::kDevice);
+  ASSERT_TRUE(buffer.ok()) << buffer.status().ToString();
+  const std::vector<uint8_t> data = Pattern(size, 99);
+  ASSERT_TRUE(UploadStaged(ctx(), data.data(), size, *buffer, 0, piece).ok());
+  std::vector<uint8_t> back(size, 0);
+  ASSERT_TRUE(DownloadStaged(ctx(), *buffer, 0, size, back.data(), piece).ok());
+  EXPECT_TRUE(back == data);
 }
 
 TEST_F(BufferTest, CopiesAndFillsOnTheDevice) {
