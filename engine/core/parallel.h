@@ -2,6 +2,10 @@
 // ParallelFor over [begin, end) in chunks on all hardware threads (or `threads` when > 0).
 // The body receives a [chunk_begin, chunk_end) range and the worker index (0..workers-1) so it can
 // use per-worker scratch without locks. Runs inline when there is one chunk.
+// The calling thread takes chunks, helped by a pool of HardwareThreads() - 1 threads kept for the
+// process (not threads started per call); so at most that many + 1 bodies run at once, however
+// large `threads`. Bodies may call ParallelFor themselves, and several threads may call it at
+// once: a caller never waits for a helper that has not started.
 #include <cstdint>
 #include <functional>
 
