@@ -45,6 +45,7 @@
 #include "engine/capture/capture.h"
 #include "engine/core/log.h"
 #include "engine/image/exr_io.h"
+#include "engine/image/image_io.h"
 #include "engine/mesh/mesh_io.h"
 #include "engine/mesh/ray_scene.h"
 #include "engine/mesh/texel_atlas.h"
@@ -366,6 +367,60 @@ BENCHMARK(BM_OccludedSingle)->ArgName("shuffled")->Arg(0)->Arg(1)->Unit(benchmar
 BENCHMARK(BM_OccludedPacket16)->ArgName("shuffled")->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OccludedSingle)->ArgName("shuffled")->Arg(0)->Threads(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OccludedPacket16)->ArgName("shuffled")->Arg(0)->Threads(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// BM_ReadPhotograph/threads:N: ReadImageRgb of one 2048^2 float RGB EXR (ZIP, as `reflcap synth`
+// writes the million preset's photographs: a shaded disc on black with 1 % noise, ~12 MB) by N
+// threads at once, each reading it over and over (from the page cache). Counter: images_per_s over
+// all threads. The GPU resample decodes photographs ahead on several threads; this says whether
+// decoding scales with them. REFLCAP_BENCH_PHOTOGRAPH=<file> reads that file instead.
+const fs::path& PhotographFile() {
+  static const fs::path path = [] {
+    if (const char* given = std::getenv("REFLCAP_BENCH_PHOTOGRAPH"); given != nullptr && *given) {
+      return fs::path(given);
+    }
+    const fs::path dir = fs::temp_directory_path() / ("reflcap_read_bench_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    constexpr int kSide = 2048;
+    Image image(kSide, kSide, 3, 0.0f);
+    std::mt19937 rng(5);
+    std::normal_distribution<float> noise(0.0f, 0.01f);
+    for (int y = 0; y < kSide; ++y) {
+      for (int x = 0; x < kSide; ++x) {
+        const float u = (x + 0.5f) / kSide * 2 - 1, v = (y + 0.5f) / kSide * 2 - 1;
+        const float r2 = u * u + v * v;
+        if (r2 >= 0.64f) continue;  // black background outside the object
+        const float shade = std::sqrt(1 - r2 / 0.64f);
+        for (int c = 0; c < 3; ++c) {
+          image.at(x, y, c) = std::max(0.0f, shade * (0.3f + 0.2f * c) * (1 + noise(rng)));
+        }
+      }
+    }
+    const Status written = WriteExr(dir / "photo.exr", image);
+    REFLCAP_CHECK(written.ok()) << written.ToString();
+    static const fs::path remove_at_exit = dir;
+    std::atexit([] { std::error_code ec; fs::remove_all(remove_at_exit, ec); });
+    return dir / "photo.exr";
+  }();
+  return path;
+}
+
+void BM_ReadPhotograph(benchmark::State& state) {
+  const fs::path& path = PhotographFile();
+  for (auto _ : state) {
+    StatusOr<Image> image = ReadImageRgb(path);
+    if (!image.ok()) {
+      state.SkipWithError(image.status().ToString().c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(image->data.data());
+  }
+  state.counters["images_per_s"] =
+      benchmark::Counter(double(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_ReadPhotograph)
+    ->ThreadRange(1, 16)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace reflcap::resample

@@ -3,11 +3,12 @@
 # ../shared/tools/gpu-bundle.sh (carry .gl and .gpu; the command is
 #   . .gpu/run-prologue.sh && bash bench/gpu/device_check.sh
 # ). Writes its logs and the million run's reports under $OUT (at most 8 files come back) and
-# prints a summary. 156 s on an H200 host at 01841b1: tests 60 s, synth 21 s, run 35 s, fits 11 s,
-# benchmarks 23 s (since then: the fit at 4 and 8 threads, ~20 s; 64 MiB transfers over 4-32 MiB
-# pieces) (BM_FitTexelsVulkanStaged, added since, runs beside BM_FitTexelsVulkan: the
-# fit's records through the staging ring against mapped device memory). Record every number with
-# the device line it prints.
+# prints a summary. 156 s on an H200 host at 01841b1 (tests 60 s, synth 21 s, run 35 s, fits
+# 11 s, benchmarks 23 s); 207 s at 7447d4e, with the fit at 4 and 8 threads beside 16 and 64 MiB
+# transfers over 4-32 MiB staging pieces; since then also the photographs' read and decode rates
+# (~10 s). BM_FitTexelsVulkanStaged runs beside BM_FitTexelsVulkan: the fit's records through
+# the staging ring against mapped device memory. Record every number with the device line it
+# prints.
 set -u
 : "${BUILD:?source .gpu/run-prologue.sh first}" "${OUT:?run through the device tool (OUT unset)}"
 R=$BUILD/bin/reflcap
@@ -50,6 +51,11 @@ print(json.dumps({k: v.get("timings", v.get("timings_s")) if isinstance(v, dict)
                   for k, v in merged.items()})[:2000])
 PY
 stamp "run done"
+# The resample waited 4.5-5.1 s for photographs at 8482aff / 7447d4e: from the disk, or decoding?
+{ time cat /tmp/mil/images/*.exr > /dev/null ; } 2>&1 | grep real | sed 's/^/read 288 photographs: /'
+REFLCAP_BENCH_PHOTOGRAPH=/tmp/mil/images/0000.exr timeout 60 \
+  "$BUILD"/bench/acquire/reflcap_resample_bench --benchmark_filter='BM_ReadPhotograph' 2>&1 |
+  grep -E "^BM_" | awk '{print $1, $2, $3, $NF}'
 for b in vulkan cpu; do
   { time "$R" fit /tmp/mil_run/samples --out /tmp/fit_$b --backend $b --quiet ; } 2>&1 | grep real
 done

@@ -65,7 +65,8 @@ StatusOr<TexelBuffer> TexelBuffer::Create(gpu::VkContext& ctx, uint64_t elements
   return t;
 }
 
-Status TexelBuffer::Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes) {
+Status TexelBuffer::Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes,
+                           uint64_t staging_bytes) {
   if (bytes > bytes_) {
     return InvalidArgumentError("TexelBuffer::Upload: ", bytes, " bytes into ", bytes_);
   }
@@ -75,7 +76,7 @@ Status TexelBuffer::Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes
     return OkStatus();
   }
   return gpu::UploadThroughStaging(
-      ctx, data, bytes, gpu::kStagingChunkBytes,
+      ctx, data, bytes, staging_bytes,
       [this](gpu::CommandBuffer& cmd, const gpu::Buffer& staging, uint64_t staging_offset,
              uint64_t done, uint64_t n) {
         const VkBufferCopy region{staging_offset, done, n};

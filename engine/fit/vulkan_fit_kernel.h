@@ -38,8 +38,9 @@ class TexelBuffer {
 
   // Copies `bytes` bytes to the start of the buffer and waits until they are there: a memcpy when
   // mapped, else through the context's staging ring (gpu::UploadThroughStaging: host copies over
-  // several threads overlapping the device's copies).
-  Status Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes);
+  // several threads overlapping the device's copies) in pieces of `staging_bytes` (> 0).
+  Status Upload(gpu::VkContext& ctx, const void* data, uint64_t bytes,
+                uint64_t staging_bytes = gpu::kStagingChunkBytes);
 
   uint64_t elements() const { return elements_; }
   VkBufferView view() const { return view_; }

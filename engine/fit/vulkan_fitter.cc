@@ -507,7 +507,9 @@ Status VulkanFitterImpl::BindBatch(const Plan& plan, Batch* b, uint64_t lane_byt
   REFLCAP_RETURN_IF_ERROR(gpu::Upload(*ctx_, b->queue.data(), queue_bytes, buffers_.queue));
   if (b->device_records->mapped() == nullptr) {
     const uint64_t texels = std::max<uint64_t>(1, b->quad.back()) * REFLCAP_FIT_QUAD_TEXELS;
-    REFLCAP_RETURN_IF_ERROR(b->device_records->Upload(*ctx_, b->rgba.data(), texels * 16));
+    REFLCAP_RETURN_IF_ERROR(b->device_records->Upload(
+        *ctx_, b->rgba.data(), texels * 16,
+        options_.staging_bytes > 0 ? options_.staging_bytes : gpu::kStagingChunkBytes));
   }
 
   internal::LmBindings bindings;

@@ -82,6 +82,9 @@ struct VulkanFitterOptions {
   // false: never write the residual quads straight into mapped device memory, upload them
   // through the staging buffer as on a discrete GPU (tests exercise that path on lavapipe).
   bool map_device_records = true;
+  // Bytes per piece of the staging ring that uploads the residual quads when they are not mapped
+  // (0 = gpu::kStagingChunkBytes, 32 MiB). Tests lower it to send a small batch in many pieces.
+  uint64_t staging_bytes = 0;
   // The LM kernel (`--vulkan-kernel`) and, for kClusters, the invocations per problem (0 =
   // automatic: 8; else a power of two up to 32 and at most the device's subgroup size) and the
   // device's exp/log.

@@ -59,11 +59,13 @@ class Buffer {
 
 // Bytes per staging copy when a buffer is not host-visible: uploads and downloads go through a
 // ring of kStagingSlots pieces of this size in a host buffer, the host copying some while the
-// device copies the others (PCIe DMA and host memcpy overlap). With two 32 MiB halves a 64 MiB
-// transfer overlapped one piece's copy with the other's, no more (H200: 15.7 / 16.5 GB/s up /
-// down); with four 8 MiB slots only the first piece's host copy and the last one's device copy
-// stand alone. 32 MiB of staging in all, as before.
-inline constexpr uint64_t kStagingChunkBytes = uint64_t{8} << 20;  // 8 MiB
+// device copies the others (PCIe DMA and host memcpy overlap). Each piece costs a submission and
+// a wake-up of the copy threads, so larger pieces won on a GPU: a 64 MiB transfer on an H200
+// (reflcap_gpu_bench, 2026-11-28, copy threads kept in a pool) moved 8.0 / 12.6 / 11.6 / 16.6
+// GB/s up and 9.1 / 13.4 / 12.6 / 14.7 down in pieces of 4 / 8 / 16 / 32 MiB. Up to 128 MiB of
+// pinned host memory, allocated on the first staged transfer (a device whose memory the host maps,
+// such as lavapipe, never stages).
+inline constexpr uint64_t kStagingChunkBytes = uint64_t{32} << 20;  // 32 MiB
 inline constexpr int kStagingSlots = 4;
 // Host copies of at least kParallelCopyBytes are split into kCopyBlockBytes blocks over up to
 // kMaxCopyThreads threads (the caller and a pool kept for the process): one core's memcpy

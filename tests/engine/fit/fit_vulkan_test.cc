@@ -423,8 +423,8 @@ TEST_F(VulkanFitterTest, ResumingAcrossDispatchesIsExact) {
 }
 
 // One batch whose residual quads (3.84 KB a texel at 64 samples) exceed a staging piece
-// (gpu::kStagingChunkBytes), uploaded through the staging ring in several pieces and slots: the
-// same bits as written straight into mapped memory.
+// (VulkanFitterOptions::staging_bytes, 1 MiB here), uploaded through the staging ring in several
+// pieces and in every slot more than once: the same bits as written straight into mapped memory.
 TEST_F(VulkanFitterTest, RecordsStagedInManyPiecesAreTheMappedOnes) {
   const auto truth = SynthMaterialTexels(3000, 73);
   SyntheticSampleOptions so;
@@ -434,6 +434,7 @@ TEST_F(VulkanFitterTest, RecordsStagedInManyPiecesAreTheMappedOnes) {
   const FitOptions options;
   VulkanFitterOptions staged_options;
   staged_options.map_device_records = false;
+  staged_options.staging_bytes = uint64_t{1} << 20;
   auto staged = CreateVulkanFitter(TestDevice(staged_options));
   ASSERT_TRUE(staged.ok()) << staged.status().ToString();
   const auto reference = RunFitter(SharedVulkanFitter(), chunk, options);
@@ -442,8 +443,8 @@ TEST_F(VulkanFitterTest, RecordsStagedInManyPiecesAreTheMappedOnes) {
   const VulkanFitStats& stats = (*staged)->last_stats();
   EXPECT_FALSE(stats.records_mapped);
   EXPECT_EQ(stats.batches, 1u);
-  // 3000 texels x 48 quads x 80 bytes = 11.5 MB: two pieces of the ring at least.
-  EXPECT_GT(uint64_t(3000) * 48 * 80, gpu::kStagingChunkBytes);
+  // 3000 texels x 48 quads x 80 bytes = 11.5 MB: more pieces than twice the ring's slots.
+  EXPECT_GT(uint64_t(3000) * 48 * 80, 2 * gpu::kStagingSlots * staged_options.staging_bytes);
   EXPECT_EQ(CountDifferent(reference, uploaded), 0);
 }
 
