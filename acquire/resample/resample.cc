@@ -2,11 +2,13 @@
 #include "acquire/resample/resample.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <deque>
 #include <future>
 #include <map>
+#include <memory>
 #include <numeric>
 #include <sstream>
 #include <thread>
@@ -321,13 +323,19 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
     std::optional<StatusOr<Image>> variance;
   };
   const bool use_variance = options.use_variance;
-  auto read_image = [&capture, use_variance](uint32_t index) {
-    return std::async(std::launch::async, [&capture, use_variance, index] {
+  // Seconds the reading threads spent reading and decoding, summed (this process's): against
+  // read_wait_s it says whether the loop waited for slow decodes or for too few of them.
+  auto read_thread_ns = std::make_shared<std::atomic<int64_t>>(0);
+  auto read_image = [&capture, use_variance, read_thread_ns](uint32_t index) {
+    return std::async(std::launch::async, [&capture, use_variance, index, read_thread_ns] {
+      const auto start = Clock::now();
       Photograph photo;
       photo.pixels = ReadImageRgb(capture.Resolve(capture.images[index].file));
       if (photo.pixels.ok() && use_variance && !capture.images[index].variance.empty()) {
         photo.variance = ReadVarianceImage(capture, index);
       }
+      *read_thread_ns += std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start)
+                             .count();
       return photo;
     });
   };
@@ -735,9 +743,11 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
                        {"source", noise.model.source}}},
       {"atlas", {{"width", atlas.width}, {"height", atlas.height}, {"source", atlas_source}}},
       {"images_skipped", skipped},
+      {"read_ahead", read_depth},
       {"views", view_range.end - view_range.begin},
       {"timings", {{"setup_s", setup_s},
                    {"read_wait_s", read_wait_s},
+                   {"read_thread_s", double(read_thread_ns->load()) * 1e-9},
                    {"resample_s", resample_s},
                    {"stream_s", stream_s},
                    {"reorder_s", reorder_s},

@@ -798,6 +798,9 @@ TEST(ResampleSynth, ReportCountsAddUpAndMatchTheStoreAndMaps) {
   for (const char* key : {"setup_s", "resample_s", "reorder_s", "total_s", "texel_image_pairs_per_s"}) {
     EXPECT_TRUE(r["timings"].contains(key)) << key;
   }
+  // Every photograph was read on a reading thread, one ahead on the CPU backend.
+  EXPECT_GT(r["timings"]["read_thread_s"].get<double>(), 0.0);
+  EXPECT_EQ(r["read_ahead"].get<int>(), 1);
   EXPECT_EQ(r["domain"]["cells_total"].get<int>(), kDomainCells);
   // The atlas defaults to the ground truth's, so texel t here is texel t of gt/params.exr.
   EXPECT_EQ(r["atlas"]["source"], "capture ground_truth.atlas");
