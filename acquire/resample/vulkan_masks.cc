@@ -651,6 +651,10 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
 }
 
 Status VulkanMasksAvailable(const std::string& device) {
+  return VulkanMasksOnGpu(device).status();
+}
+
+StatusOr<bool> VulkanMasksOnGpu(const std::string& device) {
   gpu::ContextOptions co;
   co.device = device;
   co.require_graphics = true;
@@ -658,7 +662,7 @@ Status VulkanMasksAvailable(const std::string& device) {
   if (!ctx.ok()) {
     return Status(ctx.status().code(), StrCat("--backend vulkan: ", ctx.status().message()));
   }
-  return OkStatus();
+  return !(*ctx)->info().IsSoftware();
 }
 
 }  // namespace reflcap::resample

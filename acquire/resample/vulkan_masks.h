@@ -133,4 +133,10 @@ class VulkanMasks {
 // Unavailable with the reason otherwise (no driver, no device, or a build without Vulkan).
 Status VulkanMasksAvailable(const std::string& device);
 
+// Whether the device VulkanMasks would open for `device` is a GPU (true) or a CPU implementation
+// such as lavapipe (false, whose "GPU" work competes with Embree for the same cores);
+// Unavailable as VulkanMasksAvailable. `reflcap run` resamples on the fit's device only when
+// this is true.
+StatusOr<bool> VulkanMasksOnGpu(const std::string& device);
+
 }  // namespace reflcap::resample

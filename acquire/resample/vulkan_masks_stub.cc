@@ -36,4 +36,6 @@ const VulkanMaskStats& VulkanMasks::last_stats() const { return impl_->stats; }
 
 Status VulkanMasksAvailable(const std::string&) { return UnavailableError(kNoVulkan); }
 
+StatusOr<bool> VulkanMasksOnGpu(const std::string&) { return UnavailableError(kNoVulkan); }
+
 }  // namespace reflcap::resample

@@ -182,6 +182,15 @@ TEST(NumericsStress, HostilePhotographsLeaveEveryOutputFinite) {
   if (r.exit_code == 3) GTEST_SKIP() << "no Vulkan device: " << r.err;
   ASSERT_EQ(r.exit_code, 0) << r.err;
   CheckFiniteAndPsnr(vulkan);
+  // The train split resampled on the fit's device when that is a GPU (the GPU masks then met the
+  // hostile pixels and counted them as Embree did), with Embree on a CPU device such as lavapipe.
+  const std::string device = ReadJson(vulkan / "fit" / "fit_report.json")["device"].get<std::string>();
+  const Json report = ReadJson(vulkan / "samples" / "resample_report.json");
+  const bool cpu_device = device.find(" [CPU") != std::string::npos;
+  EXPECT_EQ(report["backend"].get<std::string>(), cpu_device ? "cpu" : "vulkan") << device;
+  EXPECT_GT(report["samples_rejected"]["invalid"].get<int>(), 0);
+  EXPECT_GT(report["samples_rejected"]["clipped"].get<int>(), 0);
+  EXPECT_GT(report["samples_rejected"]["dark"].get<int>(), 0);
 }
 
 }  // namespace

@@ -461,6 +461,11 @@ TEST_F(VulkanMasksTest, RejectsWhatItCannotUse) {
                                    NoiseModel(), kDefaultMinCos, options);
   ASSERT_TRUE(masks.ok()) << masks.status().ToString();
   EXPECT_FALSE((*masks)->device_name().empty());
+  // What `reflcap run` asks before resampling on the fit's device: the same device's kind.
+  const StatusOr<bool> on_gpu = VulkanMasksOnGpu(TestDevice());
+  ASSERT_TRUE(on_gpu.ok()) << on_gpu.status().ToString();
+  EXPECT_EQ(*on_gpu, !(*masks)->software_device());
+  EXPECT_FALSE(VulkanMasksOnGpu("no-such-device").ok());
   ImageOutput out;
   EXPECT_EQ((*masks)->Process(0, Image(3, 3, 3), &out).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*masks)->Process(uint32_t(c.capture.images.size()), Image(3, 3, 3), &out).code(),
