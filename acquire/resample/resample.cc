@@ -447,10 +447,11 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   }
   const bool gpu_masks = masks != nullptr && !masks->software_device();
   // On a GPU the loop waits for decoding unless enough photographs decode at once: an H200 host
-  // (16 threads) decodes a million-preset photograph (2048^2 float EXR) in ~0.15 s on one thread
-  // while the device resamples it in ~0.023 s, and with three ahead the loop waited 4.5 s of 14.1.
-  // Half the host's threads ahead (the other half streams, tallies and feeds the device), at
-  // least 3, at most 8: each one ahead holds a decoded photograph (50 MB at 2048^2).
+  // (16 threads) decodes a million-preset photograph (2048^2 float EXR) in 77 ms on one thread
+  // (BM_ReadPhotograph) while the device resamples one in ~12 ms, so about seven must be in
+  // flight; with eight ahead the million preset's resample waited 0.08 s of 3.96 s. Half the
+  // host's threads ahead (the other half streams, tallies and feeds the device), at least 3, at
+  // most 8: each one ahead holds a decoded photograph (50 MB at 2048^2).
   const size_t gpu_depth =
       std::clamp<size_t>(size_t(std::max(1u, std::thread::hardware_concurrency())) / 2, 3, 8);
   const size_t read_depth = options.read_ahead != kAutoReadAhead ? size_t(options.read_ahead)
