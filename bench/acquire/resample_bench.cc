@@ -25,6 +25,9 @@
 // are consecutive) or shuffled (incoherent), as RayScene::Occluded one ray at a time or
 // Occluded16 sixteen at a time. Verified first: packets give exactly the single-ray answers.
 // Counters: rays_per_s, occluded_fraction, rays_per_pass, triangles.
+//
+// BM_ReadPhotograph/threads:N: one 2048^2 float EXR photograph decoded by N threads at once
+// (REFLCAP_BENCH_PHOTOGRAPH=<file> decodes that file). Counter: images_per_s.
 #include <benchmark/benchmark.h>
 
 #include <unistd.h>
