@@ -587,7 +587,9 @@ TEST_F(VulkanBatch, EvidenceRenderedOnTheDeviceDecidesAsTheCpus) {
     // With interreflection the photographs are the CPU renderer's own noise-free output: its
     // point error is the indirect light alone, the device's adds its shadow-edge differences, and
     // the ratio (-1.2e4 against -1.1e4) says only "not a box" on both.
-    if (!c.interreflection) EXPECT_TRUE(agree(gpu.reduction, cpu.reduction));
+    if (!c.interreflection) {
+      EXPECT_TRUE(agree(gpu.reduction, cpu.reduction));
+    }
     EXPECT_EQ(icpu.shows, c.interreflection);
     EXPECT_EQ(igpu.shows, icpu.shows);
     EXPECT_TRUE(agree(igpu.error_reduction, icpu.error_reduction));
