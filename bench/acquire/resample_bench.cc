@@ -381,7 +381,8 @@ const fs::path& PhotographFile() {
     if (const char* given = std::getenv("REFLCAP_BENCH_PHOTOGRAPH"); given != nullptr && *given) {
       return fs::path(given);
     }
-    const fs::path dir = fs::temp_directory_path() / ("reflcap_read_bench_" + std::to_string(getpid()));
+    const fs::path dir =
+        fs::temp_directory_path() / ("reflcap_read_bench_" + std::to_string(getpid()));
     fs::create_directories(dir);
     constexpr int kSide = 2048;
     Image image(kSide, kSide, 3, 0.0f);

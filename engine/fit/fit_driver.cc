@@ -44,11 +44,22 @@ double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
+// The values at the positions the sorted v would have them, found by selection in increasing
+// order (each on the part above the last): linear time, where sorting a million texels' costs
+// took ~0.1 s of the fit's serial tail.
 Json Percentiles(std::vector<double> v) {
   if (v.empty()) return Json::object();
-  std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
-  return Json{{"p10", at(0.10)}, {"p50", at(0.50)}, {"p90", at(0.90)}, {"p99", at(0.99)}, {"max", v.back()}};
+  Json out = Json::object();
+  auto first = v.begin();
+  for (const auto& [name, q] : {std::pair<const char*, double>{"p10", 0.10}, {"p50", 0.50},
+                                {"p90", 0.90}, {"p99", 0.99}, {"max", 1.0}}) {
+    const size_t k = std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5));
+    const auto at = v.begin() + std::ptrdiff_t(k);
+    std::nth_element(first, at, v.end());
+    out[name] = *at;
+    first = at;
+  }
+  return out;
 }
 
 // Bayesian information criterion of a texel's fit: 2 cost (= chi-square in noise units) plus

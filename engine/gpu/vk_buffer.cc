@@ -133,7 +133,8 @@ void CopyBytes(void* dst, const void* src, uint64_t size) {
   CopyPool().ParallelFor(blocks, [&](int64_t b) {
     const uint64_t begin = uint64_t(b) * kCopyBlockBytes;
     const uint64_t end = std::min(size, begin + kCopyBlockBytes);
-    std::memcpy(static_cast<char*>(dst) + begin, static_cast<const char*>(src) + begin, end - begin);
+    std::memcpy(static_cast<char*>(dst) + begin, static_cast<const char*>(src) + begin,
+                end - begin);
   });
 }
 

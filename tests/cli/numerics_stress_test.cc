@@ -184,7 +184,8 @@ TEST(NumericsStress, HostilePhotographsLeaveEveryOutputFinite) {
   CheckFiniteAndPsnr(vulkan);
   // The train split resampled on the fit's device when that is a GPU (the GPU masks then met the
   // hostile pixels and counted them as Embree did), with Embree on a CPU device such as lavapipe.
-  const std::string device = ReadJson(vulkan / "fit" / "fit_report.json")["device"].get<std::string>();
+  const std::string device =
+      ReadJson(vulkan / "fit" / "fit_report.json")["device"].get<std::string>();
   const Json report = ReadJson(vulkan / "samples" / "resample_report.json");
   const bool cpu_device = device.find(" [CPU") != std::string::npos;
   EXPECT_EQ(report["backend"].get<std::string>(), cpu_device ? "cpu" : "vulkan") << device;

@@ -74,7 +74,8 @@ TEST(CopyBytesTest, LargeCopiesFromSeveralThreadsAtOnceAreExact) {
       int bad = 0;
       for (int repeat = 0; repeat < 3; ++repeat) {
         for (size_t size : sizes) {
-          const std::vector<uint8_t> from = Pattern(size, uint32_t(size) + 7u * uint32_t(c) + repeat);
+          const std::vector<uint8_t> from =
+              Pattern(size, uint32_t(size) + 7u * uint32_t(c) + uint32_t(repeat));
           std::vector<uint8_t> to(size + 2, 0xEE);
           CopyBytes(to.data() + 1, from.data(), size);
           bad += !std::equal(from.begin(), from.end(), to.begin() + 1);
