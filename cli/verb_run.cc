@@ -85,7 +85,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
     // holdout renders there: on an H200 the million preset resampled in 3.6-4.0 s on the GPU,
     // against 14.1-16.0 s with Embree on its host's 16 cores. A CPU device (lavapipe) would share
     // the cores Embree uses: Embree stays. (A normal-map capture casts no ray to mask.)
-    const StatusOr<bool> gpu = resample::VulkanMasksOnGpu(options.fit_device);
+    const StatusOr<bool> gpu = resample::VulkanMasksOnGpu(options.fit_device, &capture);
     if (gpu.ok() && *gpu) {
       resample_options.backend = resample::Backend::kVulkan;
       resample_options.device = options.fit_device;

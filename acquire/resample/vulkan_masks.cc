@@ -654,7 +654,7 @@ Status VulkanMasksAvailable(const std::string& device) {
   return VulkanMasksOnGpu(device).status();
 }
 
-StatusOr<bool> VulkanMasksOnGpu(const std::string& device) {
+StatusOr<bool> VulkanMasksOnGpu(const std::string& device, const Capture* capture) {
   gpu::ContextOptions co;
   co.device = device;
   co.require_graphics = true;
@@ -662,7 +662,20 @@ StatusOr<bool> VulkanMasksOnGpu(const std::string& device) {
   if (!ctx.ok()) {
     return Status(ctx.status().code(), StrCat("--backend vulkan: ", ctx.status().message()));
   }
-  return !(*ctx)->info().IsSoftware();
+  const gpu::DeviceInfo& info = (*ctx)->info();
+  for (size_t i = 0; capture != nullptr && i < capture->cameras.size(); ++i) {
+    // As Process: a photograph's RGB floats are one storage-buffer binding.
+    const Camera& camera = capture->cameras[i];
+    const uint64_t bytes =
+        uint64_t(std::max(camera.width, 0)) * uint64_t(std::max(camera.height, 0)) * 3 * sizeof(float);
+    if (bytes > info.max_storage_buffer_range) {
+      return UnavailableError(capture->json_path.string(), ": cameras[", i, "]: ", camera.width,
+                              "x", camera.height, " photographs are more than one storage-buffer "
+                              "binding of ", info.name, " holds (", info.max_storage_buffer_range,
+                              " bytes)");
+    }
+  }
+  return !info.IsSoftware();
 }
 
 }  // namespace reflcap::resample

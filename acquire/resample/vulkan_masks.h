@@ -135,8 +135,10 @@ Status VulkanMasksAvailable(const std::string& device);
 
 // Whether the device VulkanMasks would open for `device` is a GPU (true) or a CPU implementation
 // such as lavapipe (false, whose "GPU" work competes with Embree for the same cores);
-// Unavailable as VulkanMasksAvailable. `reflcap run` resamples on the fit's device only when
-// this is true.
-StatusOr<bool> VulkanMasksOnGpu(const std::string& device);
+// Unavailable as VulkanMasksAvailable, and, when `capture` is given, Unavailable naming the
+// camera when its photographs are larger than one storage-buffer binding of the device holds
+// (Process would refuse them). `reflcap run` resamples on the fit's device only when this is
+// true.
+StatusOr<bool> VulkanMasksOnGpu(const std::string& device, const Capture* capture = nullptr);
 
 }  // namespace reflcap::resample

@@ -36,6 +36,8 @@ const VulkanMaskStats& VulkanMasks::last_stats() const { return impl_->stats; }
 
 Status VulkanMasksAvailable(const std::string&) { return UnavailableError(kNoVulkan); }
 
-StatusOr<bool> VulkanMasksOnGpu(const std::string&) { return UnavailableError(kNoVulkan); }
+StatusOr<bool> VulkanMasksOnGpu(const std::string&, const Capture*) {
+  return UnavailableError(kNoVulkan);
+}
 
 }  // namespace reflcap::resample

@@ -466,6 +466,14 @@ TEST_F(VulkanMasksTest, RejectsWhatItCannotUse) {
   ASSERT_TRUE(on_gpu.ok()) << on_gpu.status().ToString();
   EXPECT_EQ(*on_gpu, !(*masks)->software_device());
   EXPECT_FALSE(VulkanMasksOnGpu("no-such-device").ok());
+  EXPECT_EQ(*VulkanMasksOnGpu(TestDevice(), &c.capture), *on_gpu);
+  // Photographs larger than any storage-buffer binding (at most 4 GiB): Process would refuse them.
+  Capture huge = c.capture;
+  huge.cameras[0].width = huge.cameras[0].height = 65536;
+  const StatusOr<bool> too_large = VulkanMasksOnGpu(TestDevice(), &huge);
+  EXPECT_EQ(too_large.status().code(), StatusCode::kUnavailable);
+  EXPECT_NE(too_large.status().message().find("cameras[0]"), std::string::npos)
+      << too_large.status().message();
   ImageOutput out;
   EXPECT_EQ((*masks)->Process(0, Image(3, 3, 3), &out).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*masks)->Process(uint32_t(c.capture.images.size()), Image(3, 3, 3), &out).code(),
