@@ -44,8 +44,8 @@ for name, path in reports.items():
     except OSError as e:
         merged[name] = str(e)
         continue
-    merged[name] = {k: d[k] for k in ("timings", "timings_s", "vulkan", "pixel_model", "indirect")
-                    if k in d}
+    merged[name] = {k: d[k] for k in ("timings", "timings_s", "vulkan", "pixel_model", "indirect",
+                                      "backend", "read_ahead") if k in d}
 json.dump(merged, open(out + "/reports.json", "w"), indent=1)
 print(json.dumps({k: v.get("timings", v.get("timings_s")) if isinstance(v, dict) else v
                   for k, v in merged.items()})[:2000])
