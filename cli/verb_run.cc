@@ -233,7 +233,8 @@ int RunRun(int argc, char** argv) {
   args.AddInt("indirect-rays", &options.indirect_rays,
               "rays per texel gathering interreflection, 1..1024 (default 64)");
   args.AddString("backend", &backend, "NAME",
-                 "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or vulkan");
+                 "fit backend: auto (default: a GPU if there is one, else cpu), cpu, ceres or "
+                 "vulkan; on a GPU the train split's resample and the holdout render run there too");
   args.AddString("device", &device, "NAME|INDEX", "Vulkan device for the fit (index or name substring)");
   fit_flags.Register(&args, &options.fit);
   args.AddFlag("overwrite", &options.overwrite, "replace DIR if it exists (only once the new one is complete)");
