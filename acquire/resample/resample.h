@@ -146,9 +146,9 @@ struct ResampleOptions {
   // Photographs decoded ahead of the one being resampled, on their own threads, and whether each
   // one's samples are streamed to the store while the next is resampled: kAutoReadAhead = half the
   // host's threads (3 to 8) and streaming alongside when the masks run on a GPU (the host's cores
-  // are then mostly idle),
-  // else 1 and in turn (Embree, or lavapipe, keeps every core busy: overlapping there made the
-  // million preset 30 -> 35 s on 2 cores). The store is the same byte for byte either way.
+  // are then mostly idle), else 1 and in turn (Embree, or lavapipe, keeps every core busy:
+  // overlapping there made the million preset 30 -> 35 s on 2 cores). The store is the same byte
+  // for byte either way.
   int read_ahead = kAutoReadAhead;
 
   Status Validate() const;  // InvalidArgument naming the option
