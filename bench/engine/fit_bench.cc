@@ -284,6 +284,26 @@ void BM_PrepareTexel(benchmark::State& state) {
 }
 BENCHMARK(BM_PrepareTexel)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// What one ParallelFor call costs beyond its work: 64 chunks of a few nanoseconds each on all
+// hardware threads (the fit makes ~1,200 such calls per million texels, most with real work).
+// The time column is the time per call; checked: every chunk ran once per call.
+void BM_ParallelForCall(benchmark::State& state) {
+  std::vector<int> hits(64, 0);
+  for (auto _ : state) {
+    ParallelFor(0, int64_t(hits.size()), 1, [&](int64_t b, int64_t e, int) {
+      for (int64_t i = b; i < e; ++i) ++hits[size_t(i)];
+    });
+  }
+  for (int h : hits) {
+    if (h != int(state.iterations())) {
+      state.SkipWithError("a chunk did not run exactly once per call");
+      return;
+    }
+  }
+  state.SetLabel(std::to_string(HardwareThreads()) + " hardware threads");
+}
+BENCHMARK(BM_ParallelForCall)->UseRealTime()->Unit(benchmark::kMicrosecond);
+
 // The Vulkan fitter's kernels side by side at 10^6 texels: /kernel/cluster_size/texels, kernel
 // 0 = lanes, 1 = clusters (bench/RESULTS.md's GPU sweep; slow on lavapipe: run it on a GPU).
 void BM_FitVulkanKernel(benchmark::State& state) {
