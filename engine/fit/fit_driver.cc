@@ -8,6 +8,7 @@
 #include <cmath>
 #include <functional>
 #include <future>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <utility>
@@ -128,10 +129,16 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   REFLCAP_CHECK(sigma->lobes() == fits->lobes());
   REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits->size());
   REFLCAP_CHECK(cluster_of.empty() || cluster_of.size() == fits->size());
+  // The three files are filled on all threads (each texel owns its pixel) and written at once,
+  // each compressed on OpenEXR's pool. One after another, each write's part outside the pool
+  // (the file, the sigma spill's read) left the pool waiting: maps 0.59 s of the million fit on
+  // an H200 host at 16 threads and 0.71 at 8; on 2 cores 0.93 s then, 0.73-0.75 s at once, the
+  // files byte-identical.
+  std::future<Status> status_written, params_written;
   {
     constexpr int kStatusChannels = 7;
-    // The maps are filled on all threads (each texel owns its pixel), then compressed on them.
-    Image status(atlas.width, atlas.height, kStatusChannels, 0.0f);
+    auto status_image = std::make_shared<Image>(atlas.width, atlas.height, kStatusChannels, 0.0f);
+    Image& status = *status_image;
     ParallelFor(0, int64_t(status.PixelCount()), kMapRowsPerTask * atlas.width,
                 [&](int64_t begin, int64_t end, int) {
       for (int64_t p = begin; p < end; ++p) {
@@ -154,17 +161,20 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
         px[6] = float(int(TexelModelOf(*fits, t)));
       }
     }, threads);
-    REFLCAP_RETURN_IF_ERROR(WriteExrChannels(dir / "status.exr", status,
-                                             {"status", "iterations", "cost", "lobe_donor",
-                                              "albedo_filled", "material_cluster", "model"},
-                                             ExrPixelType::kFloat, threads));
+    status_written = std::async(std::launch::async, [status_image, dir, threads] {
+      return WriteExrChannels(dir / "status.exr", *status_image,
+                              {"status", "iterations", "cost", "lobe_donor", "albedo_filled",
+                               "material_cluster", "model"},
+                              ExrPixelType::kFloat, threads);
+    });
   }
   const std::vector<std::string> names = BrdfChannelNames(fits->lobes());
   const std::vector<int> channel = MapChannelOfSlot(fits->lobes());
   REFLCAP_CHECK(names.size() == channel.size());
   const int n = int(channel.size());
   {
-    Image params(atlas.width, atlas.height, n, 0.0f);
+    auto params_image = std::make_shared<Image>(atlas.width, atlas.height, n, 0.0f);
+    Image& params = *params_image;
     ParallelFor(0, int64_t(fits->size()), kMapTexelsPerTask, [&](int64_t begin, int64_t end, int) {
       for (int64_t t = begin; t < end; ++t) {
         PutTexel(channel, fits->params(t), &params.data[size_t(atlas.pixel_of_texel[t]) * n]);
@@ -172,11 +182,13 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     }, threads);
     // The parameters are in the image now: freed before it is written.
     fits->ReleaseParams();
-    REFLCAP_RETURN_IF_ERROR(
-        WriteExrChannels(dir / "params.exr", params, names, ExrPixelType::kFloat, threads));
+    params_written = std::async(std::launch::async, [params_image, dir, names, threads] {
+      return WriteExrChannels(dir / "params.exr", *params_image, names, ExrPixelType::kFloat,
+                              threads);
+    });
   }
   Image sigmas(atlas.width, atlas.height, n, 0.0f);
-  REFLCAP_RETURN_IF_ERROR(sigma->ReadAll([&](size_t t, const float* in) {
+  const Status sigmas_read = sigma->ReadAll([&](size_t t, const float* in) {
     float* px = &sigmas.data[size_t(atlas.pixel_of_texel[t]) * n];
     PutTexel(channel, in, px);
     // Lobe transfer re-fitted the albedo of a texel with a donor: re-fitted, not measured. A
@@ -186,8 +198,18 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
       const int unknown = fits->donor(t) < 0 ? n : brdf::kChannels;
       for (int c = 0; c < unknown; ++c) px[c] = -1;
     }
-  }));
-  return WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat, threads);
+  });
+  const Status sigmas_written =
+      sigmas_read.ok()
+          ? WriteExrChannels(dir / "sigma.exr", sigmas, names, ExrPixelType::kFloat, threads)
+          : sigmas_read;
+  // Every write finished (and its file renamed into place or not) before any error returns.
+  const Status status_status = status_written.get();
+  const Status params_status = params_written.get();
+  for (const Status& s : {status_status, params_status, sigmas_written}) {
+    if (!s.ok()) return s;
+  }
+  return OkStatus();
 }
 
 namespace {
