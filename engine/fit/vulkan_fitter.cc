@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "engine/core/log.h"
+#include "engine/core/default_init_allocator.h"
 #include "engine/core/parallel.h"
 #include "engine/fit/fitter_base.h"
 #include "engine/fit/problem.h"
@@ -203,8 +204,12 @@ struct Batch {
   std::vector<PreparedProblem> problems;  // (end - begin) x ProblemsPerTexel
   std::vector<SolvedProblem> solved;      // filled for kRouteTrivial / kRouteCpu problems
   std::vector<uint8_t> route;
-  std::vector<float> records;             // 5 sections of slot.back() floats (see the top)
-  std::vector<float> rgba;                // the device's quads when device_records is not mapped
+  // Not zeroed when they grow (a million-texel batch's records are 3.84 GB, its quads as many:
+  // zeroing them was serial, before Prepare's workers write them in parallel). Only what Prepare
+  // wrote is read: each problem's residuals through its views, and the device reads the quads of
+  // the problems it is given (the other texels' quads, like mapped device memory, hold garbage).
+  UninitializedVector<float> records;     // 5 sections of slot.back() floats (see the top)
+  UninitializedVector<float> rgba;        // the device's quads when device_records is not mapped
   internal::TexelBuffer* device_records = nullptr;  // the batch's device quads
   float* quads = nullptr;                 // where Prepare writes them: device_records' memory, or rgba
   std::vector<uint32_t> desc;
