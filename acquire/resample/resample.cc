@@ -11,7 +11,6 @@
 #include <memory>
 #include <numeric>
 #include <sstream>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
@@ -23,6 +22,7 @@
 #include "acquire/resample/vulkan_masks.h"
 #include "engine/core/atomic_file.h"
 #include "engine/core/log.h"
+#include "engine/core/parallel.h"
 #include "engine/core/progress.h"
 #include "engine/core/shard.h"
 #include "engine/image/exr_io.h"
@@ -453,7 +453,7 @@ StatusOr<ResampleSummary> ResampleCapture(const Capture& original, const Resampl
   // host's threads ahead (the other half streams, tallies and feeds the device), at least 3, at
   // most 8: each one ahead holds a decoded photograph (50 MB at 2048^2).
   const size_t gpu_depth =
-      std::clamp<size_t>(size_t(std::max(1u, std::thread::hardware_concurrency())) / 2, 3, 8);
+      std::clamp<size_t>(size_t(HardwareThreads()) / 2, 3, 8);
   const size_t read_depth = options.read_ahead != kAutoReadAhead ? size_t(options.read_ahead)
                             : gpu_masks                          ? gpu_depth
                                                                  : 1;

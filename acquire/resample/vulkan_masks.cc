@@ -100,6 +100,13 @@ struct CameraGrid {
   std::unique_ptr<Buffer> rays;
 };
 
+// Bytes of one of a camera's photographs as Process binds it (RGB floats, one storage-buffer
+// binding): Process refuses, and VulkanMasksOnGpu reports, cameras above the device's range.
+uint64_t PhotographBytes(const Camera& camera) {
+  return uint64_t(std::max(camera.width, 0)) * uint64_t(std::max(camera.height, 0)) * 3 *
+         sizeof(float);
+}
+
 }  // namespace
 
 Status VulkanMaskOptions::Validate() const {
@@ -530,7 +537,7 @@ Status VulkanMasks::Process(uint32_t image_index, const Image& pixels, ImageOutp
   m.stats.map_height = int(p.map_height);
 
   // Buffers, targets and descriptor sets (rewritten only here, between submissions).
-  const uint64_t pixel_bytes = uint64_t(w) * h * 3 * sizeof(float);
+  const uint64_t pixel_bytes = PhotographBytes(camera);
   if (pixel_bytes > ctx.info().max_storage_buffer_range) {
     return UnavailableError("Vulkan masks: ", field, " has ", uint64_t(w) * h,
                             " pixels, more than one storage-buffer binding holds (",
@@ -664,11 +671,8 @@ StatusOr<bool> VulkanMasksOnGpu(const std::string& device, const Capture* captur
   }
   const gpu::DeviceInfo& info = (*ctx)->info();
   for (size_t i = 0; capture != nullptr && i < capture->cameras.size(); ++i) {
-    // As Process: a photograph's RGB floats are one storage-buffer binding.
     const Camera& camera = capture->cameras[i];
-    const uint64_t bytes =
-        uint64_t(std::max(camera.width, 0)) * uint64_t(std::max(camera.height, 0)) * 3 * sizeof(float);
-    if (bytes > info.max_storage_buffer_range) {
+    if (PhotographBytes(camera) > info.max_storage_buffer_range) {
       return UnavailableError(capture->json_path.string(), ": cameras[", i, "]: ", camera.width,
                               "x", camera.height, " photographs are more than one storage-buffer "
                               "binding of ", info.name, " holds (", info.max_storage_buffer_range,

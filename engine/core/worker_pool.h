@@ -1,8 +1,9 @@
 #pragma once
-// WorkerPool: a fixed set of threads that stays alive across calls, for the render stage's
-// pipelined host work — the Vulkan renderer's read-back of each finished batch (ParallelFor, many
-// times a second at GPU speed, where engine/core/parallel.h's thread start per call would cost
-// more than the copy) and `reflcap render`'s file writers (Submit, overlapped with rendering).
+// WorkerPool: a fixed set of threads that stays alive across calls. Its users: the helpers of
+// every engine/core/parallel.h ParallelFor (Submit), the large host copies of engine/gpu
+// (vk_buffer.cc, ParallelFor), the Vulkan renderer's read-back of each finished batch
+// (ParallelFor, many times a second at GPU speed) and `reflcap render`'s file writers (Submit,
+// overlapped with rendering).
 //
 // Tasks must not throw. The destructor runs every queued task, then joins the threads.
 #include <condition_variable>

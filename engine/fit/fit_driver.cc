@@ -117,7 +117,7 @@ TexelModel TexelModelOf(const FitStore& fits, size_t t) {
                                                  : TexelModel::kLambertNoEvidence;
 }
 
-// Work per ParallelFor task while the maps are filled: large enough that a thread's start is
+// Work per ParallelFor task while the maps are filled: large enough that a task's hand-over is
 // negligible, small enough to balance (a million-texel atlas is ~1,300 rows).
 constexpr int64_t kMapRowsPerTask = 16;
 constexpr int64_t kMapTexelsPerTask = 1 << 14;
