@@ -77,8 +77,15 @@ stamp "fits done"
 # 3. Micro-benchmarks: fits/s over 10^6 texels, render batches, transfers.
 timeout 120 "$BUILD"/bench/engine/reflcap_fit_bench --benchmark_filter='BM_FitTexels.*/1000000' 2>&1 |
   grep -E "^BM_|device_" | tee "$OUT/fit_bench.txt"
-timeout 60 "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/512' 2>&1 |
+# The batched renderer with one cost taken away at a time (aux read-back, host shadow edges,
+# shadow-map drawing), against the rasterised paths, with device timestamps: what limits it.
+# Then 1024 px.
+REFLCAP_BENCH_RENDER_SIZES=512 REFLCAP_BENCH_RENDER_VARIANTS=1 timeout 90 \
+  "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/512/64' 2>&1 |
   grep -E "^BM_" | tee "$OUT/render_bench.txt"
+REFLCAP_BENCH_RENDER_SIZES=1024 timeout 60 \
+  "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/1024/64' 2>&1 |
+  grep -E "^BM_" | tee -a "$OUT/render_bench.txt"
 timeout 60 "$BUILD"/bench/gpu/reflcap_gpu_bench --benchmark_filter='BM_(Upload|Download)Staged/64|BM_Mad' 2>&1 |
   grep -E "^BM_" | tee "$OUT/gpu_bench.txt"
 stamp "all done"

@@ -32,6 +32,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -57,6 +58,51 @@ constexpr double kMaxTexels = 1e6;
 // Lens distortion of the "distorted" variants: barrel with decentring, as a short lens has.
 constexpr std::array<double, 5> kDistortion = {-0.18, 0.09, 0.0012, -0.0008, -0.015};
 
+// BM_RenderBatch's diagnostic variants (REFLCAP_BENCH_RENDER_VARIANTS=1: Variants() below).
+enum class Variant {
+  kAsVerified,
+  kNoAux,
+  kNoEdges,
+  kKept,
+  kShared,
+  kResolve,
+  kRasterised,
+  kProfiled,
+  kProfiledRasterised
+};
+
+// The renderer options of `variant` (those that differ from the batch renderer's).
+VulkanRenderOptions VariantOptions(VulkanRenderOptions o, Variant variant) {
+  switch (variant) {
+    case Variant::kNoEdges:
+      o.exact_shadow_edges = false;
+      break;
+    case Variant::kKept:
+      o.shadow_cache_mib = VulkanRenderOptions().shadow_cache_mib;
+      break;
+    case Variant::kShared:
+      o.per_image_targets = false;
+      break;
+    case Variant::kResolve:
+      o.camera_shading = CameraShading::kResolve;
+      break;
+    case Variant::kProfiledRasterised:
+      o.profile_device = true;
+      [[fallthrough]];
+    case Variant::kRasterised:
+      o.shadow_raster = ShadowRaster::kGraphics;
+      o.camera_shading = CameraShading::kFragment;
+      break;
+    case Variant::kProfiled:
+      o.profile_device = true;
+      break;
+    case Variant::kAsVerified:
+    case Variant::kNoAux:
+      break;
+  }
+  return o;
+}
+
 struct Case {
   int size = 0;
   bool distorted = false;
@@ -64,6 +110,9 @@ struct Case {
   std::unique_ptr<FittedCapture> fitted;
   std::unique_ptr<VulkanRenderer> renderer;        // RenderImage, kept shadow maps off
   std::unique_ptr<VulkanRenderer> batch_renderer;  // RenderImages, kept shadow maps off
+  // The renderers of the diagnostic variants of BM_RenderBatch that need their own options
+  // (REFLCAP_BENCH_RENDER_VARIANTS=1; VariantOptions).
+  std::map<Variant, std::unique_ptr<VulkanRenderer>> variant_renderers;
   std::vector<RenderResult> vulkan_renders;        // per image, verified against the CPU
   RenderAgreement agreement;  // pooled over the capture's images
   double worst_psnr_db = 0;
@@ -76,6 +125,21 @@ RenderOptions Options() {
   o.aux_buffers = true;  // as `reflcap render` renders
   return o;
 }
+
+// REFLCAP_BENCH_RENDER_VARIANTS=1 adds BM_RenderBatch variants that take one cost away at a time
+// (for finding what limits the batched renderer on a device; their outputs differ from the
+// verified renders by design, so those are timed unverified): .../noaux (no aux buffers: half
+// the read-back), .../noedges (no shadow-edge pixels shaded on the host), .../kept (kept shadow
+// maps: the 4 cycled images draw theirs once), .../shared (VulkanRenderOptions::
+// per_image_targets off), .../resolve (CameraShading::kResolve), .../rasterised (shadow maps by
+// the depth pass: ShadowRaster::kGraphics), .../profiled and .../profiled_rasterised (device
+// timestamps around each image's phases: counters dev_*; the timestamps may serialise what they
+// measure). .../shared and .../profiled render the verified bits (checked).
+bool Variants() {
+  const char* env = std::getenv("REFLCAP_BENCH_RENDER_VARIANTS");
+  return env != nullptr && std::atoi(env) != 0;
+}
+
 
 StatusOr<std::unique_ptr<Case>> Prepare(int size, bool distorted, const fs::path& root,
                                         const std::string& device) {
@@ -126,6 +190,15 @@ StatusOr<std::unique_ptr<Case>> Prepare(int size, bool distorted, const fs::path
   }
   REFLCAP_ASSIGN_OR_RETURN(c->batch_renderer, VulkanRenderer::Create(device, batch_options));
   REFLCAP_RETURN_IF_ERROR(SetFittedScene(*c->batch_renderer, *c->fitted));
+  if (Variants()) {
+    for (Variant v : {Variant::kNoEdges, Variant::kKept, Variant::kShared, Variant::kResolve,
+                      Variant::kRasterised, Variant::kProfiled, Variant::kProfiledRasterised}) {
+      REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<VulkanRenderer> r,
+                               VulkanRenderer::Create(device, VariantOptions(batch_options, v)));
+      REFLCAP_RETURN_IF_ERROR(SetFittedScene(*r, *c->fitted));
+      c->variant_renderers[v] = std::move(r);
+    }
+  }
   return c;
 }
 
@@ -141,7 +214,7 @@ bool SameBits(const Image& a, const Image& b) {
          std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(float)) == 0;
 }
 
-void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
+void BM_RenderBatch(benchmark::State& state, Case* c, size_t n, Variant variant) {
   if (c->worst_psnr_db < kMinAgreementPsnrDb) {
     state.SkipWithError(StrCat("Vulkan render disagrees with the CPU reference: worst image ",
                                c->worst_psnr_db, " dB; ", c->agreement.ToString())
@@ -149,10 +222,18 @@ void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
     return;
   }
   const std::vector<size_t> indices = Cycled(*c, n);
+  const auto own = c->variant_renderers.find(variant);
+  VulkanRenderer& renderer =
+      own != c->variant_renderers.end() ? *own->second : *c->batch_renderer;
+  RenderOptions options = Options();
+  if (variant == Variant::kNoAux) options.aux_buffers = false;
   // Verify: the batched renders are the verified per-image renders, bit for bit.
   size_t mismatches = 0;
-  Status s = RenderCaptureImagesVulkan(
-      *c->batch_renderer, *c->fitted, indices, Options(), [&](size_t k, RenderResult&& r) {
+  // The variants that change only how the device is driven render the same bits.
+  const bool verified = variant == Variant::kAsVerified || variant == Variant::kShared ||
+                        variant == Variant::kProfiled;
+  Status s = !verified ? OkStatus() : RenderCaptureImagesVulkan(
+      renderer, *c->fitted, indices, options, [&](size_t k, RenderResult&& r) {
         const RenderResult& expected = c->vulkan_renders[indices[k]];
         if (!SameBits(r.pixels, expected.pixels) || !SameBits(r.mask, expected.mask) ||
             !SameBits(r.aux, expected.aux)) {
@@ -167,10 +248,12 @@ void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
                                : s.ToString().c_str());
     return;
   }
-  double gpu_s = 0, wait_s = 0, readback_s = 0;
+  double gpu_s = 0, wait_s = 0, readback_s = 0, edge_s = 0, record_s = 0;
+  double device_s = 0, device_shadow_s = 0, device_pass_s = 0, device_outputs_s = 0;
+  bool device_timed = false;
   size_t submissions = 0;
   for (auto _ : state) {
-    s = RenderCaptureImagesVulkan(*c->batch_renderer, *c->fitted, indices, Options(),
+    s = RenderCaptureImagesVulkan(renderer, *c->fitted, indices, options,
                                   [](size_t, RenderResult&& r) {
                                     benchmark::DoNotOptimize(r.pixels.data.data());
                                     return OkStatus();
@@ -179,10 +262,17 @@ void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
       state.SkipWithError(s.ToString().c_str());
       return;
     }
-    const VulkanBatchStats& b = c->batch_renderer->last_batch_stats();
-    gpu_s += c->batch_renderer->last_stats().gpu_seconds;
+    const VulkanBatchStats& b = renderer.last_batch_stats();
+    gpu_s += renderer.last_stats().gpu_seconds;
     wait_s += b.wait_s;
     readback_s += b.readback_s;
+    edge_s += b.shadow_edge_s;
+    record_s += b.record_s;
+    device_timed = b.device_timed;
+    device_s += b.device_s;
+    device_shadow_s += b.device_shadow_s;
+    device_pass_s += b.device_pass_s;
+    device_outputs_s += b.device_outputs_s;
     submissions += b.submissions;
   }
   const double images = double(state.iterations()) * double(n);
@@ -193,11 +283,19 @@ void BM_RenderBatch(benchmark::State& state, Case* c, size_t n) {
   state.counters["gpu_s"] = gpu_s / std::max(1.0, images);
   state.counters["wait_s"] = wait_s / std::max(1.0, images);          // host blocked on fences
   state.counters["readback_s"] = readback_s / std::max(1.0, images);  // host copies, parallel
+  state.counters["edge_s"] = edge_s / std::max(1.0, images);  // host rays (part of readback_s)
+  state.counters["record_s"] = record_s / std::max(1.0, images);
+  if (device_timed) {  // timestamps (profiled variants): device time per image and its phases
+    state.counters["dev_s"] = device_s / std::max(1.0, images);
+    state.counters["dev_shadow_s"] = device_shadow_s / std::max(1.0, images);
+    state.counters["dev_pass_s"] = device_pass_s / std::max(1.0, images);
+    state.counters["dev_outputs_s"] = device_outputs_s / std::max(1.0, images);
+  }
   state.counters["psnr_worst_db"] = c->worst_psnr_db;
-  state.counters["in_flight"] = c->batch_renderer->options().batches_in_flight;
-  state.SetLabel(c->batch_renderer->device().name + "; " +
-                 c->batch_renderer->last_stats().shadow_map + " shadow map " +
-                 std::to_string(c->batch_renderer->last_stats().shadow_resolution) + " px");
+  state.counters["in_flight"] = renderer.options().batches_in_flight;
+  state.SetLabel(renderer.device().name + "; " + renderer.last_stats().shadow_map +
+                 " shadow map " + std::to_string(renderer.last_stats().shadow_resolution) +
+                 " px" + (verified ? "" : "; unverified variant"));
 }
 
 size_t BatchImages() {
@@ -300,11 +398,24 @@ int main(int argc, char** argv) {
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
     const size_t n = BatchImages();
-    benchmark::RegisterBenchmark(
-        ("BM_RenderBatch/vulkan/" + suffix + "/" + std::to_string(n)).c_str(), BM_RenderBatch,
-        c.get(), n)
+    const std::string batch = "BM_RenderBatch/vulkan/" + suffix + "/" + std::to_string(n);
+    benchmark::RegisterBenchmark(batch.c_str(), BM_RenderBatch, c.get(), n, Variant::kAsVerified)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
+    if (Variants()) {
+      for (auto [name, v] : {std::pair{"/noaux", Variant::kNoAux},
+                             std::pair{"/noedges", Variant::kNoEdges},
+                             std::pair{"/kept", Variant::kKept},
+                             std::pair{"/shared", Variant::kShared},
+                             std::pair{"/resolve", Variant::kResolve},
+                             std::pair{"/rasterised", Variant::kRasterised},
+                             std::pair{"/profiled", Variant::kProfiled},
+                             std::pair{"/profiled_rasterised", Variant::kProfiledRasterised}}) {
+        benchmark::RegisterBenchmark((batch + name).c_str(), BM_RenderBatch, c.get(), n, v)
+            ->Unit(benchmark::kMillisecond)
+            ->UseRealTime();
+      }
+    }
   }
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();

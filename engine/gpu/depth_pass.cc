@@ -21,7 +21,7 @@ StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(VkContext& ctx, uint32_t wi
                                                      uint32_t height, uint32_t layers,
                                                      const std::vector<VkFormat>& color_formats,
                                                      VkImageLayout color_final_layout,
-                                                     bool sampled_depth) {
+                                                     bool sampled_depth, PassWait wait) {
   auto t = std::make_unique<PassTarget>();
   t->width = width;
   t->height = height;
@@ -45,8 +45,12 @@ StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(VkContext& ctx, uint32_t wi
   d.height = height;
   d.layers = layers;
   d.format = VK_FORMAT_D32_SFLOAT;
+  // A sampled depth image (a light map) may also be filled by a copy (the Vulkan renderer's
+  // compute-drawn shadow maps).
   d.usage = VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT |
-            (sampled_depth ? VkImageUsageFlags{VK_IMAGE_USAGE_SAMPLED_BIT} : VkImageUsageFlags{0});
+            (sampled_depth ? VkImageUsageFlags{VK_IMAGE_USAGE_SAMPLED_BIT |
+                                               VK_IMAGE_USAGE_TRANSFER_DST_BIT}
+                           : VkImageUsageFlags{0});
   d.cube_compatible = cube;
   REFLCAP_ASSIGN_OR_RETURN(DeviceImage depth, DeviceImage::Create(ctx, d));
   t->depth = std::make_unique<DeviceImage>(std::move(depth));
@@ -54,7 +58,8 @@ StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(VkContext& ctx, uint32_t wi
       t->target,
       RenderTarget::Create(ctx, colors, t->depth.get(), color_final_layout,
                            sampled_depth ? VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL
-                                         : VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL));
+                                         : VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+                           wait));
   return t;
 }
 

@@ -52,12 +52,14 @@ struct PassTarget {
 
 // A pass target of `color_formats` attachments (ending in `color_final_layout`) and a D32 depth
 // attachment — sampled and ending in SHADER_READ_ONLY_OPTIMAL when `sampled_depth` (light maps),
-// else kept as an attachment. Six square layers are cube-compatible.
+// else kept as an attachment. Six square layers are cube-compatible. `wait`: what its pass waits
+// for (PassWait).
 StatusOr<std::unique_ptr<PassTarget>> MakePassTarget(VkContext& ctx, uint32_t width,
                                                      uint32_t height, uint32_t layers,
                                                      const std::vector<VkFormat>& color_formats,
                                                      VkImageLayout color_final_layout,
-                                                     bool sampled_depth);
+                                                     bool sampled_depth,
+                                                     PassWait wait = PassWait::kEverything);
 
 // Unavailable (naming `purpose`) unless the device can render to and sample every format of
 // `color_formats` and D32_SFLOAT.

@@ -48,6 +48,7 @@ enum class ShaderId {
   kRenderDistortResolve,   // shaders/render/distort_resolve.comp: exact rays of distorted cameras
   kRenderDownsample,       // shaders/render/downsample.comp: supersampling box filter
   kRenderNormalMapShade,   // shaders/render/normal_map_shade.comp: normal-map captures
+  kRenderShadowRaster,     // shaders/render/shadow_raster.comp: shadow maps by compute
   kResampleMaskDrawVert,   // shaders/resample/mask_draw.vert: light/camera passes, vertex pulling
   kResampleMaskLightFrag,  // shaders/resample/mask_light.frag: light-map distances
   kResampleMaskCameraFrag, // shaders/resample/mask_camera.frag: camera map (distance, lit, hit)

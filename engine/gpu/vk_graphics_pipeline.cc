@@ -70,7 +70,7 @@ StatusOr<VkPipelineLayout> CreateLayout(VkContext& ctx, VkDescriptorSetLayout se
 
 StatusOr<RenderTarget> RenderTarget::Create(VkContext& ctx, const std::vector<DeviceImage*>& colors,
                                             DeviceImage* depth, VkImageLayout color_final_layout,
-                                            VkImageLayout depth_final_layout) {
+                                            VkImageLayout depth_final_layout, PassWait wait) {
   if (colors.empty() && depth == nullptr) {
     return InvalidArgumentError("RenderTarget: no attachments");
   }
@@ -139,14 +139,23 @@ StatusOr<RenderTarget> RenderTarget::Create(VkContext& ctx, const std::vector<De
                                                      VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
   constexpr VkAccessFlags kAttachmentWrites =
       VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+  // What earlier work the pass waits for (PassWait).
+  VkPipelineStageFlags earlier = kAttachmentStages;
+  VkAccessFlags earlier_writes = kAttachmentWrites;
+  if (wait == PassWait::kEverything) {
+    earlier |= kOutside;
+    earlier_writes |= VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+  } else if (wait == PassWait::kShaderReads) {
+    earlier |= VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+    earlier_writes |= VK_ACCESS_SHADER_WRITE_BIT;
+  }
   VkSubpassDependency deps[2] = {};
   // Earlier reads of (and writes to) the attachments finish before the pass writes them.
   deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
   deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = kOutside | kAttachmentStages;
+  deps[0].srcStageMask = earlier;
   deps[0].dstStageMask = kAttachmentStages;
-  deps[0].srcAccessMask =
-      VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT | kAttachmentWrites;
+  deps[0].srcAccessMask = earlier_writes;
   deps[0].dstAccessMask = kAttachmentWrites | VK_ACCESS_COLOR_ATTACHMENT_READ_BIT |
                           VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT;
   // The pass's writes are visible to later shader reads and transfers.

@@ -8,8 +8,9 @@
 //     vertex attributes; draws are non-indexed triangle lists (vkCmdDraw(3 * triangles)).
 //   - Every attachment is cleared at the start of the pass and stored at its end, and ends in the
 //     final layout given for its kind (RenderTarget::Create).
-//     External subpass dependencies order the pass after earlier shader/transfer work and make
-//     its attachment writes visible to later fragment/compute shaders and transfers.
+//     External subpass dependencies order the pass after earlier shader/transfer work (PassWait
+//     says which) and make its attachment writes visible to later fragment/compute shaders and
+//     transfers.
 //   - Viewport and scissor are dynamic and set by RenderTarget::Begin to the whole target.
 //   - Push constants (if any) are visible to every stage of the pipeline.
 //   - Specialization constants apply to every stage.
@@ -26,6 +27,22 @@
 
 namespace reflcap::gpu {
 
+// What a render pass waits for before it writes its attachments (its external dependency from
+// earlier commands). Every mode makes the pass's own writes visible to later fragment and compute
+// shaders and transfers, and waits for earlier passes' attachment writes (which orders passes).
+enum class PassWait {
+  // Earlier fragment and compute shaders, transfers and passes: safe whatever read the
+  // attachments before (a shared target that an earlier image's copy reads).
+  kEverything,
+  // Earlier fragment and compute shaders and passes, not transfers: for attachments that shaders
+  // sample but no transfer reads or writes (shadow maps). A pass then need not wait for an
+  // earlier image's copy to the host.
+  kShaderReads,
+  // Earlier passes only: for attachments that nothing recorded earlier in the same submission
+  // touches (a target of the image's own), whose earlier uses a fence has already seen finish.
+  kPasses,
+};
+
 class RenderTarget {
  public:
   // A render pass drawing into `colors` (in order: fragment output locations 0, 1, ...) and
@@ -37,7 +54,8 @@ class RenderTarget {
   static StatusOr<RenderTarget> Create(
       VkContext& ctx, const std::vector<DeviceImage*>& colors, DeviceImage* depth,
       VkImageLayout color_final_layout,
-      VkImageLayout depth_final_layout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL);
+      VkImageLayout depth_final_layout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+      PassWait wait = PassWait::kEverything);
 
   RenderTarget() = default;
   ~RenderTarget();

@@ -65,12 +65,16 @@ CaptureRenderBackend VulkanCaptureRenderBackend(VulkanRenderer& renderer) {
                             "the light is outside it, else "
                             "cube map";
   b.renderer = StrCat(
-      "Vulkan renderer (render/vulkan): rasterised direct light, per-fragment Lambert + "
-      "Lafortune, shadow maps (point lights: ",
-      point, "; directional: orthographic; ", o.shadow_texels_per_pixel,
+      "Vulkan renderer (render/vulkan): rasterised direct light, Lambert + Lafortune shaded ",
+      renderer.resolves_pinhole_cameras()
+          ? "per pixel from a visibility image by exact camera rays"
+          : "per fragment (distorted cameras: per pixel from a visibility image by exact rays)",
+      ", shadow maps drawn by ",
+      renderer.computes_shadow_maps() ? "compute (texel rays against the triangles)"
+                                      : "the depth pass",
+      " (point lights: ", point, "; directional: orthographic; ", o.shadow_texels_per_pixel,
       " shadow texels per image pixel, at least ", o.min_shadow_resolution,
-      " per side), exact distorted rays through a visibility image, no "
-      "interreflection");
+      " per side), no interreflection");
   // A GPU renders the auto settings' evidence too; lavapipe leaves it to the CPU reference
   // renderer, ~3x faster on the same cores (bench/RESULTS.md: `reflcap render` medium preset,
   // 19.7 s on the CPU backend against 58.1 s on lavapipe).

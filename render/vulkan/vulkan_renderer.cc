@@ -21,6 +21,7 @@
 #include "engine/gpu/vk_descriptors.h"
 #include "engine/gpu/vk_graphics_pipeline.h"
 #include "engine/gpu/vk_image.h"
+#include "engine/gpu/vk_timestamps.h"
 #include "engine/gpu/vk_view.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/ray_scene.h"
@@ -47,7 +48,8 @@ using gpu::RenderTarget;
 // Descriptor bindings (shaders/render/render_inputs.glsl and the passes).
 constexpr uint32_t kBindParams = 0, kBindCorners = 1, kBindTriangles = 2, kBindMaterial = 3,
                    kBindFrame = 4, kBindShadowMap = 5, kBindSource = 6, kBindOutRadiance = 7,
-                   kBindOutAux = 8, kBindNormalMapTexels = 9, kBindHeightField = 10;
+                   kBindOutAux = 8, kBindNormalMapTexels = 9, kBindHeightField = 10,
+                   kBindShadowRaster = 11;
 // Workgroup sizes of the compute passes (the shaders' local_size).
 constexpr uint32_t kTile = 8;         // distort_resolve.comp, downsample.comp: 8 x 8
 constexpr uint32_t kTexelGroup = 64;  // normal_map_shade.comp
@@ -61,6 +63,8 @@ constexpr double kMaxVisibilityRatio = 8;
 // Kept pass targets of other sizes than the current batch needs, per kind, before idle ones are
 // released (captures have a few camera sizes; more means sizes vary image to image).
 constexpr size_t kMaxIdleTargets = 8;
+// Pass-target sizes a slot keeps (per_image_targets): captures mix at most a few camera sizes.
+constexpr size_t kSlotTargets = 2;
 // Parameter blocks are written by vkCmdUpdateBuffer: at most 65536 bytes, a multiple of 4.
 static_assert(sizeof(gpu::shared::RenderParams) % 4 == 0 &&
               sizeof(gpu::shared::RenderParams) <= 65536);
@@ -200,7 +204,11 @@ std::string VulkanBatchStats::ToString() const {
                 record_s, " s, wait ", wait_s, " s, read-back ", readback_s, " s, sink ", sink_s,
                 " s); shadow maps drawn ", shadow_maps_drawn, ", reused ", shadow_maps_reused,
                 "; ", shadow_edge_pixels, " shadow-edge pixels shaded on the host in ",
-                shadow_edge_s, " s");
+                shadow_edge_s, " s",
+                device_timed ? StrCat("; device ", device_s, " s (shadow maps ", device_shadow_s,
+                                      " s, passes ", device_pass_s, " s, outputs ",
+                                      device_outputs_s, " s)")
+                             : std::string());
 }
 
 // ---- Impl -----------------------------------------------------------------------------------
@@ -251,13 +259,20 @@ struct CachedTarget {
   std::vector<uint8_t> content;  // shadow maps: ShadowContent of the last map drawn; empty: none
   uint64_t last_use = 0;         // Impl::use_counter at the last use (LRU)
   uint64_t batch = 0;            // the last batch (Impl::batch_counter) recorded with it
+  // Camera, supersampled and visibility targets: every image and batch uses it, so a pass on it
+  // first waits for earlier reads (BeginPass). Their render passes wait only for earlier passes
+  // (PassWait::kPasses), as a slot's own do: one render pass kind, one pipeline each.
+  bool shared = false;
   uint64_t Bytes() const { return uint64_t(width) * height * layers * 4; }
 };
 
 // Image k of a Flight: its descriptor sets (created on first use) and output buffers.
 struct Slot {
-  std::unique_ptr<DescriptorSet> light, camera, hires, resolve, downsample, normal_map;
+  std::unique_ptr<DescriptorSet> light, camera, hires, resolve, downsample, normal_map, raster;
   std::unique_ptr<Buffer> out_radiance, out_aux, out_mask;
+  // Camera and visibility pass targets of this slot's own (VulkanRenderOptions::
+  // per_image_targets), at most kSlotTargets sizes, least recently used first out.
+  std::vector<std::unique_ptr<CachedTarget>> targets;
 };
 
 // One submission: command buffer and fence, the images' parameter blocks (two per image,
@@ -270,6 +285,10 @@ struct Flight {
   std::vector<Slot> slots;
   std::vector<size_t> images;  // plan indices, in slot order; empty when idle
   uint64_t batch = 0;
+  bool per_image_targets = false;  // this batch's images use their slots' own targets
+  // VulkanRenderOptions::profile_device: query 0 at the start, 1 + 3k + {0, 1, 2} after image
+  // k's shadow map, pass and outputs.
+  std::unique_ptr<gpu::TimestampQueryPool> timestamps;
 };
 
 Status EnsureSet(gpu::VkContext& ctx, std::unique_ptr<DescriptorSet>* set,
@@ -297,14 +316,39 @@ void RecordCopyToBuffer(VkCommandBuffer cb, DeviceImage& image, const Buffer& ds
                          &region);
 }
 
-// Transfer writes (fills) finish and are visible before later compute shaders write or read.
-void RecordTransferToCompute(VkCommandBuffer cb) {
+// `src_access` of earlier work in `src_stages` finishes and is visible to `dst_access` of later
+// work in `dst_stages`.
+void RecordMemoryBarrier(VkCommandBuffer cb, VkPipelineStageFlags src_stages,
+                         VkAccessFlags src_access, VkPipelineStageFlags dst_stages,
+                         VkAccessFlags dst_access) {
   VkMemoryBarrier barrier{};
   barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
-  barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-  barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
-                       1, &barrier, 0, nullptr, 0, nullptr);
+  barrier.srcAccessMask = src_access;
+  barrier.dstAccessMask = dst_access;
+  vkCmdPipelineBarrier(cb, src_stages, dst_stages, 0, 1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+// Transfer writes (fills) finish and are visible before later compute shaders write or read.
+void RecordTransferToCompute(VkCommandBuffer cb) {
+  RecordMemoryBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                      VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+}
+
+// Begins `target`'s pass on layer 0; a shared target first waits for earlier shaders and
+// copies that read it (an execution dependency suffices for reads; the render pass orders the
+// writes of earlier passes).
+void BeginPass(VkCommandBuffer cb, CachedTarget& target) {
+  if (target.shared) {
+    vkCmdPipelineBarrier(cb,
+                         VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
+                             VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT |
+                             VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT |
+                             VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT,
+                         0, 0, nullptr, 0, nullptr, 0, nullptr);
+  }
+  target.target->target.Begin(cb, 0, {});
 }
 
 }  // namespace
@@ -321,9 +365,14 @@ struct VulkanRenderer::Impl {
   // Descriptor set layouts, one per pass (the light layout — params + corners — serves the
   // shadow and the visibility pass), and the pipelines.
   DescriptorSetLayout light_layout, camera_layout, resolve_layout, downsample_layout,
-      normal_map_layout;
+      normal_map_layout, raster_layout;
   Pipeline shadow_pipeline, depth_pipeline, camera_pipeline, visibility_pipeline,
-      resolve_pipeline, downsample_pipeline, normal_map_pipeline;
+      resolve_pipeline, downsample_pipeline, normal_map_pipeline, raster_pipeline;
+  // Compute-drawn shadow maps (ShadowRaster::kCompute): the raster buffer every map is drawn into
+  // before its copy into the map, and the smaller ones it replaced while submissions that use
+  // them may still run (freed once none is in flight).
+  std::unique_ptr<Buffer> raster_buffer;
+  std::vector<std::unique_ptr<Buffer>> retired_raster_buffers;
 
   // Scene.
   enum class SceneKind { kNone, kMesh, kNormalMap } scene_kind = SceneKind::kNone;
@@ -383,12 +432,34 @@ struct VulkanRenderer::Impl {
                                         uint32_t w, uint32_t h,
                                         const std::vector<VkFormat>& formats,
                                         VkImageLayout final_layout);
+  // A target of `slot`'s own (its flight is idle: no submission uses the slot's targets), whose
+  // pass waits only for earlier passes (PassWait::kPasses) and needs no barrier before it.
+  StatusOr<CachedTarget*> AcquireSlotTarget(Slot& slot, uint32_t w, uint32_t h,
+                                            const std::vector<VkFormat>& formats,
+                                            VkImageLayout final_layout);
+  // Records timestamp `index` of the flight's pool (profile_device).
+  void Stamp(Flight& flight, uint32_t index) {
+    if (flight.timestamps != nullptr) (void)flight.timestamps->Write(flight.cmd, index);
+  }
+  // Adds a completed flight's timestamps to batch_stats.
+  void AddDeviceTimes(const Flight& flight);
+  bool IsCpuDevice() const { return ctx->info().IsSoftware(); }
+  bool ComputeShadowMaps() const {
+    return options.shadow_raster == ShadowRaster::kCompute ||
+           (options.shadow_raster == ShadowRaster::kAuto && !IsCpuDevice());
+  }
+  bool ResolvePinhole() const { return options.camera_shading == CameraShading::kResolve; }
+  // Records drawing image k's shadow map `shadow` by compute (shadow_raster.comp).
+  Status RecordComputeShadowMap(Flight& flight, size_t k, const ImagePlan& plan,
+                                CachedTarget& shadow);
   // The shadow map of `plan`: a kept one holding exactly its views (*reused), else one to draw.
   StatusOr<CachedTarget*> AcquireShadowMap(const ImagePlan& plan, bool* reused);
   // Releases kept targets that the batch being recorded does not use, once nothing submitted
   // can still use them (drains the submissions first).
   Status ReleaseIdle(std::vector<std::unique_ptr<CachedTarget>>* cache);
-  Status EnsurePipelines();
+  // The pipelines not made yet whose pass targets (of any size) are given (null: not needed).
+  Status EnsurePipelines(const CachedTarget* camera, const CachedTarget* visibility,
+                         const CachedTarget* shadow);
   void Draw(VkCommandBuffer cb, const Pipeline& pipeline, const DescriptorSet& set) {
     pipeline.Bind(cb, set.handle());
     vkCmdDraw(cb, 3 * triangle_count, 1, 0, 0);
@@ -467,17 +538,19 @@ Status VulkanRenderer::Impl::Init(const VulkanRenderOptions& o) {
   return OkStatus();
 }
 
-Status VulkanRenderer::Impl::EnsurePipelines() {
+Status VulkanRenderer::Impl::EnsurePipelines(const CachedTarget* camera,
+                                             const CachedTarget* visibility,
+                                             const CachedTarget* shadow) {
   // Each pipeline is made with the first target of its kind: render passes of other sizes (and
-  // layer counts) with the same formats are compatible with it.
-  if (depth_pipeline.handle() == VK_NULL_HANDLE && !camera_targets.empty()) {
+  // layer counts, and external dependencies) with the same formats are compatible with it.
+  if (depth_pipeline.handle() == VK_NULL_HANDLE && camera != nullptr) {
     // Depth pre-pass, then shading with depth EQUAL: every pixel is shaded once, by its nearest
     // surface (the full shading is what costs, on lavapipe above all).
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kRenderSurfaceVert;
     o.set_layout = camera_layout.handle();
     o.color_writes = false;
-    const gpu::RenderTarget& target = camera_targets.front()->target->target;
+    const gpu::RenderTarget& target = camera->target->target;
     REFLCAP_ASSIGN_OR_RETURN(depth_pipeline, Pipeline::CreateGraphics(*ctx, o, target));
     o.fragment = gpu::ShaderId::kRenderSurfaceFrag;
     o.color_writes = true;
@@ -485,21 +558,21 @@ Status VulkanRenderer::Impl::EnsurePipelines() {
     o.depth_write = false;
     REFLCAP_ASSIGN_OR_RETURN(camera_pipeline, Pipeline::CreateGraphics(*ctx, o, target));
   }
-  if (visibility_pipeline.handle() == VK_NULL_HANDLE && !visibility_targets.empty()) {
+  if (visibility_pipeline.handle() == VK_NULL_HANDLE && visibility != nullptr) {
     gpu::GraphicsPipelineOptions o;
     o.vertex = gpu::ShaderId::kRenderSurfaceVert;
     o.fragment = gpu::ShaderId::kRenderVisibilityFrag;
     o.set_layout = light_layout.handle();  // params + corners
     REFLCAP_ASSIGN_OR_RETURN(
         visibility_pipeline,
-        Pipeline::CreateGraphics(*ctx, o, visibility_targets.front()->target->target));
+        Pipeline::CreateGraphics(*ctx, o, visibility->target->target));
   }
-  if (shadow_pipeline.handle() == VK_NULL_HANDLE && !shadow_maps.empty()) {
+  if (shadow_pipeline.handle() == VK_NULL_HANDLE && shadow != nullptr) {
     REFLCAP_ASSIGN_OR_RETURN(
         shadow_pipeline,
         gpu::CreateLightMapPipeline(*ctx, gpu::ShaderId::kRenderShadowVert,
                                     gpu::ShaderId::kRenderShadowFrag, light_layout.handle(),
-                                    shadow_maps.front()->target->target));
+                                    shadow->target->target));
   }
   return OkStatus();
 }
@@ -580,7 +653,7 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
   plan.exposure_s = exposure_s;
   plan.options = options;
   const int w = camera.width, h = camera.height, n = options.supersampling;
-  const bool distorted = pinhole && (camera.HasDistortion() || this->options.always_resolve);
+  const bool distorted = pinhole && (camera.HasDistortion() || ResolvePinhole());
   const bool point_light = light.type == LightType::kPoint;
   plan.width = w;
   plan.height = h;
@@ -662,6 +735,7 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
     views = light_map.view_count;
     res = light_map.resolution;
     plan.stats.shadow_map = light_map.kind;
+    plan.stats.shadow_map_computed = ComputeShadowMaps();
     p.flags |= sh::kRenderFlagCastShadows;
     plan.stats.shadow_resolution = res;
   }
@@ -855,13 +929,58 @@ StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireTarget(
   REFLCAP_RETURN_IF_ERROR(ReleaseIdle(cache));
   auto t = std::make_unique<CachedTarget>();
   REFLCAP_ASSIGN_OR_RETURN(t->target,
-                           MakePassTarget(*ctx, w, h, 1, formats, final_layout, false));
+                           MakePassTarget(*ctx, w, h, 1, formats, final_layout, false,
+                                          gpu::PassWait::kPasses));
+  t->shared = true;
   t->width = w;
   t->height = h;
   t->layers = 1;
   t->batch = batch_counter;
   cache->push_back(std::move(t));
   return cache->back().get();
+}
+
+StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireSlotTarget(
+    Slot& slot, uint32_t w, uint32_t h, const std::vector<VkFormat>& formats,
+    VkImageLayout final_layout) {
+  ++use_counter;
+  for (const std::unique_ptr<CachedTarget>& t : slot.targets) {
+    if (t->width == w && t->height == h && t->target->colors.size() == formats.size() &&
+        t->target->colors[0]->format() == formats[0]) {
+      t->last_use = use_counter;
+      return t.get();
+    }
+  }
+  if (slot.targets.size() >= kSlotTargets) {
+    slot.targets.erase(std::min_element(
+        slot.targets.begin(), slot.targets.end(),
+        [](const auto& a, const auto& b) { return a->last_use < b->last_use; }));
+  }
+  auto t = std::make_unique<CachedTarget>();
+  REFLCAP_ASSIGN_OR_RETURN(t->target, MakePassTarget(*ctx, w, h, 1, formats, final_layout, false,
+                                                     gpu::PassWait::kPasses));
+  t->width = w;
+  t->height = h;
+  t->layers = 1;
+  t->last_use = use_counter;
+  slot.targets.push_back(std::move(t));
+  return slot.targets.back().get();
+}
+
+void VulkanRenderer::Impl::AddDeviceTimes(const Flight& flight) {
+  if (flight.timestamps == nullptr) return;
+  const uint32_t last = uint32_t(3 * flight.images.size());
+  auto elapsed = [&](uint32_t a, uint32_t b) {
+    StatusOr<double> s = flight.timestamps->ElapsedSeconds(a, b);
+    return s.ok() ? *s : 0.0;
+  };
+  batch_stats.device_timed = true;
+  batch_stats.device_s += elapsed(0, last);
+  for (uint32_t k = 0; k < flight.images.size(); ++k) {
+    batch_stats.device_shadow_s += elapsed(3 * k, 3 * k + 1);
+    batch_stats.device_pass_s += elapsed(3 * k + 1, 3 * k + 2);
+    batch_stats.device_outputs_s += elapsed(3 * k + 2, 3 * k + 3);
+  }
 }
 
 StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireShadowMap(const ImagePlan& plan,
@@ -897,10 +1016,12 @@ StatusOr<CachedTarget*> VulkanRenderer::Impl::AcquireShadowMap(const ImagePlan& 
   } else {
     REFLCAP_RETURN_IF_ERROR(ReleaseIdle(&shadow_maps));
     auto t = std::make_unique<CachedTarget>();
+    // No transfer reads or writes a shadow map: its pass waits for earlier shader reads of it
+    // (images sampling the map it redraws), not for earlier images' copies to the host.
     REFLCAP_ASSIGN_OR_RETURN(t->target,
                              MakePassTarget(*ctx, res, res, layers, {},
                                             VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL,
-                                            /*sampled_depth=*/true));
+                                            /*sampled_depth=*/true, gpu::PassWait::kShaderReads));
     t->width = t->height = res;
     t->layers = layers;
     shadow_maps.push_back(std::move(t));
@@ -944,20 +1065,29 @@ Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const Ima
   const std::vector<VkFormat> kCameraFormats = {VK_FORMAT_R32G32B32A32_SFLOAT,
                                                 VK_FORMAT_R32G32B32A32_SFLOAT};
   if (plan.distorted) {
+    const uint32_t vw = uint32_t(plan.vis_width), vh = uint32_t(plan.vis_height);
+    const std::vector<VkFormat> formats = {VK_FORMAT_R32_UINT};
     REFLCAP_ASSIGN_OR_RETURN(
         visibility,
-        AcquireTarget(&visibility_targets, uint32_t(plan.vis_width), uint32_t(plan.vis_height),
-                      {VK_FORMAT_R32_UINT}, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
+        flight.per_image_targets
+            ? AcquireSlotTarget(slot, vw, vh, formats, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL)
+            : AcquireTarget(&visibility_targets, vw, vh, formats,
+                            VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
   } else {
-    REFLCAP_ASSIGN_OR_RETURN(camera, AcquireTarget(&camera_targets, w, h, kCameraFormats,
-                                                   VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL));
+    REFLCAP_ASSIGN_OR_RETURN(
+        camera, flight.per_image_targets
+                    ? AcquireSlotTarget(slot, w, h, kCameraFormats,
+                                        VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL)
+                    : AcquireTarget(&camera_targets, w, h, kCameraFormats,
+                                    VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL));
     if (plan.Supersampled()) {
       REFLCAP_ASSIGN_OR_RETURN(hires,
                                AcquireTarget(&hires_targets, w * n, h * n, kCameraFormats,
                                              VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL));
     }
   }
-  REFLCAP_RETURN_IF_ERROR(EnsurePipelines());
+  REFLCAP_RETURN_IF_ERROR(EnsurePipelines(camera != nullptr ? camera : hires, visibility,
+                                          ComputeShadowMaps() ? nullptr : shadow));
 
   // Descriptor sets of this slot (no submission using them is pending: the flight is idle).
   constexpr VkImageLayout kRead = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
@@ -994,27 +1124,37 @@ Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const Ima
     }
   }
 
-  // Record. Attachments shared with earlier images are safe to overwrite: each render pass waits
-  // for earlier reads of them (engine/gpu/vk_graphics_pipeline.h, external dependencies).
+  // Record. Attachments shared with earlier images are safe to overwrite: each pass on them waits
+  // for earlier reads of them (shared targets: BeginPass's barrier; shadow maps: their render
+  // pass, PassWait::kShaderReads); a slot's own targets were last read by a submission whose
+  // fence the host has seen.
   const VkCommandBuffer cb = flight.cmd.handle();
+  const uint32_t stamp = uint32_t(1 + 3 * k);
   if (shadow != nullptr && !shadow_reused) {
-    gpu::RecordLightMapViews(cb, shadow_pipeline, slot.light->handle(), shadow->target->target,
-                             plan.shadow_views, triangle_count);
+    if (ComputeShadowMaps()) {
+      REFLCAP_RETURN_IF_ERROR(RecordComputeShadowMap(flight, k, plan, *shadow));
+    } else {
+      gpu::RecordLightMapViews(cb, shadow_pipeline, slot.light->handle(), shadow->target->target,
+                               plan.shadow_views, triangle_count);
+    }
     ++batch_stats.shadow_maps_drawn;
   } else if (shadow != nullptr) {
     ++batch_stats.shadow_maps_reused;
   }
+  Stamp(flight, stamp);
   if (plan.distorted) {
-    visibility->target->target.Begin(cb, 0, {});
+    BeginPass(cb, *visibility);
     Draw(cb, visibility_pipeline, *slot.light);
     visibility->target->target.End(cb);
+    Stamp(flight, stamp + 1);
     resolve_pipeline.Bind(cb, slot.resolve->handle());
     vkCmdDispatch(cb, (w + kTile - 1) / kTile, (h + kTile - 1) / kTile, 1);
   } else {
-    camera->target->target.Begin(cb, 0, {});
+    BeginPass(cb, *camera);
     Draw(cb, depth_pipeline, *slot.camera);
     Draw(cb, camera_pipeline, *slot.camera);
     camera->target->target.End(cb);
+    Stamp(flight, stamp + 1);
     RecordCopyToBuffer(cb, *camera->target->colors[0],
                        plan.Supersampled() ? *slot.out_mask : *slot.out_radiance, plan.rect_x0,
                        plan.rect_y0, plan.rect_w, plan.rect_h);
@@ -1023,7 +1163,7 @@ Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const Ima
                          plan.rect_y0, plan.rect_w, plan.rect_h);
     }
     if (plan.Supersampled()) {
-      hires->target->target.Begin(cb, 0, {});
+      BeginPass(cb, *hires);
       Draw(cb, depth_pipeline, *slot.hires);
       Draw(cb, camera_pipeline, *slot.hires);
       hires->target->target.End(cb);
@@ -1033,6 +1173,131 @@ Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const Ima
       vkCmdDispatch(cb, (w + kTile - 1) / kTile, (h + kTile - 1) / kTile, 1);
     }
   }
+  Stamp(flight, stamp + 2);
+  return OkStatus();
+}
+
+namespace {
+
+// The most map texels one invocation of shadow_raster.comp visits for `mesh` in the views of
+// `params` (resolution `res`): a triangle's bounding box over the workgroup's 32 invocations,
+// the whole map for a triangle reaching behind a view's near plane (as the shader's box may).
+uint64_t MostRasterTexelsPerInvocation(const TriangleMesh& mesh, const sh::RenderParams& params,
+                                       uint32_t views, uint32_t res) {
+  constexpr uint64_t kWorkgroup = 32;  // shadow_raster.comp local_size_x
+  uint64_t most = 0;
+  for (uint32_t v = 0; v < views; ++v) {
+    const sh::vec4* rows = params.views[v].clip_from_object;
+    for (const auto& tri : mesh.triangles) {
+      double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
+      bool whole = false;
+      for (int c = 0; c < 3; ++c) {
+        const Vec3f& p = mesh.positions[tri[c]];
+        double q[4];
+        for (int r = 0; r < 4; ++r) {
+          const sh::vec4& m = rows[r];
+          q[r] = double(m.x) * p.x() + double(m.y) * p.y() + double(m.z) * p.z() + double(m.w);
+        }
+        if (!(q[2] >= 0 && q[3] > 0)) {
+          whole = true;
+          break;
+        }
+        for (int a = 0; a < 2; ++a) {
+          lo[a] = std::min(lo[a], q[a] / q[3]);
+          hi[a] = std::max(hi[a], q[a] / q[3]);
+        }
+      }
+      uint64_t texels = uint64_t(res) * res;
+      if (!whole) {
+        uint64_t side[2];
+        for (int a = 0; a < 2; ++a) {
+          const double first = std::clamp(std::floor((lo[a] * 0.5 + 0.5) * res - 0.5), 0.0,
+                                          double(res) - 1);
+          const double last = std::clamp(std::ceil((hi[a] * 0.5 + 0.5) * res - 0.5), 0.0,
+                                         double(res) - 1);
+          side[a] = last >= first ? uint64_t(last - first) + 1 : 0;
+        }
+        texels = side[0] * side[1];
+      }
+      most = std::max(most, (texels + kWorkgroup - 1) / kWorkgroup);
+    }
+  }
+  return most;
+}
+
+}  // namespace
+
+Status VulkanRenderer::Impl::RecordComputeShadowMap(Flight& flight, size_t k,
+                                                   const ImagePlan& plan, CachedTarget& shadow) {
+  Slot& slot = flight.slots[k];
+  gpu::VkContext& c = *ctx;
+  const uint32_t res = uint32_t(plan.shadow_resolution), layers = plan.shadow_views;
+  // A device that stops long loops silently (lavapipe) would leave texels of a large triangle
+  // undrawn: refuse instead.
+  const uint32_t budget = gpu::MaxLoopIterationsPerInvocation(c.info());
+  if (budget != gpu::kNoLoopIterationLimit) {
+    const uint64_t most =
+        MostRasterTexelsPerInvocation(mesh_scene.scene->mesh(), plan.params, layers, res);
+    if (gpu::LoopSteps(most) > budget) {
+      return UnavailableError("a triangle covers up to ", most * 32, " texels of a ", res,
+                              "² shadow map, more than compute-drawn maps can visit on ",
+                              c.info().name, " (", budget,
+                              " loop steps per invocation): use ShadowRaster::kGraphics");
+    }
+  }
+  const uint64_t bytes = uint64_t(res) * res * layers * sizeof(uint32_t);
+  if (raster_buffer == nullptr || raster_buffer->size() < bytes) {
+    if (raster_buffer != nullptr) retired_raster_buffers.push_back(std::move(raster_buffer));
+    REFLCAP_ASSIGN_OR_RETURN(Buffer b, Buffer::Create(c, bytes, gpu::MemoryKind::kDevice));
+    raster_buffer = std::make_unique<Buffer>(std::move(b));
+  }
+  if (raster_pipeline.handle() == VK_NULL_HANDLE) {
+    REFLCAP_ASSIGN_OR_RETURN(raster_layout,
+                             DescriptorSetLayout::Create(c, {{kBindParams, kSsbo, kComp},
+                                                             {kBindCorners, kSsbo, kComp},
+                                                             {kBindShadowRaster, kSsbo, kComp}}));
+    gpu::ComputeLayoutPipelineOptions o;
+    o.shader = gpu::ShaderId::kRenderShadowRaster;
+    o.set_layout = raster_layout.handle();
+    o.push_constant_bytes = sizeof(sh::ShadowRasterPush);
+    REFLCAP_ASSIGN_OR_RETURN(raster_pipeline, Pipeline::CreateCompute(c, o));
+  }
+  REFLCAP_RETURN_IF_ERROR(EnsureSet(c, &slot.raster, raster_layout));
+  slot.raster->WriteBuffer(kBindParams, *flight.params, 2 * k * params_stride,
+                           sizeof(sh::RenderParams));
+  slot.raster->WriteBuffer(kBindCorners, *corners);
+  slot.raster->WriteBuffer(kBindShadowRaster, *raster_buffer, 0, bytes);
+
+  const VkCommandBuffer cb = flight.cmd.handle();
+  // Earlier work that reads the raster buffer (the last map's copy) or this map (images that
+  // sampled it before it is redrawn) finishes first; then the map may be overwritten.
+  RecordMemoryBarrier(cb, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, VK_ACCESS_MEMORY_WRITE_BIT,
+                      VK_PIPELINE_STAGE_TRANSFER_BIT,
+                      VK_ACCESS_MEMORY_READ_BIT | VK_ACCESS_MEMORY_WRITE_BIT);
+  gpu::DeviceImage& map = *shadow.target->depth;
+  map.TransitionTo(cb, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL);
+  // Every texel starts at 1.0 (the pass's depth clear: nothing before the distance scale).
+  constexpr uint32_t kOneBits = 0x3F800000u;
+  vkCmdFillBuffer(cb, raster_buffer->handle(), 0, bytes, kOneBits);
+  RecordTransferToCompute(cb);
+  // One workgroup per triangle, at most 65,535 along x (the limit every device allows).
+  constexpr uint32_t kMaxGroupsX = 65535;
+  const uint32_t groups_x = std::min(triangle_count, kMaxGroupsX);
+  const uint32_t groups_y = (triangle_count + groups_x - 1) / groups_x;
+  raster_pipeline.Bind(cb, slot.raster->handle());
+  for (uint32_t v = 0; v < layers; ++v) {
+    const sh::ShadowRasterPush push{v, res, triangle_count, groups_x};
+    raster_pipeline.Push(cb, &push, sizeof(push));
+    vkCmdDispatch(cb, groups_x, groups_y, 1);
+  }
+  RecordMemoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                      VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+  VkBufferImageCopy region{};
+  region.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, layers};
+  region.imageExtent = {res, res, 1};
+  vkCmdCopyBufferToImage(cb, raster_buffer->handle(), map.handle(),
+                         VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+  map.TransitionTo(cb, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL);
   return OkStatus();
 }
 
@@ -1060,6 +1325,7 @@ Status VulkanRenderer::Impl::RecordNormalMapImage(Flight& flight, size_t k,
   normal_map_pipeline.Bind(cb, set.handle());
   normal_map_pipeline.Push(cb, &push, sizeof(push));
   vkCmdDispatch(cb, (texel_count + kTexelGroup - 1) / kTexelGroup, 1, 1);
+  for (uint32_t i = 1; i <= 3; ++i) Stamp(flight, uint32_t(3 * k + i));
   return OkStatus();
 }
 
@@ -1167,6 +1433,7 @@ Status VulkanRenderer::Impl::CompleteOldest() {
   REFLCAP_RETURN_IF_ERROR(flight.cmd.Wait(ctx->options().submit_timeout_s));
   batch_stats.wait_s += SecondsSince(t);
   stats.gpu_seconds += flight.cmd.last_submit_wall_s();
+  AddDeviceTimes(flight);
   t = std::chrono::steady_clock::now();
   std::vector<RenderResult> results;
   ReadBack(flight, &results);
@@ -1184,6 +1451,7 @@ Status VulkanRenderer::Impl::CompleteOldest() {
 
 Status VulkanRenderer::Impl::Drain() {
   while (!in_flight.empty()) REFLCAP_RETURN_IF_ERROR(CompleteOldest());
+  retired_raster_buffers.clear();  // nothing submitted can use them any more
   return OkStatus();
 }
 
@@ -1244,7 +1512,22 @@ Status VulkanRenderer::Impl::RenderPlans(const std::vector<ImagePlan>& all,
         flight.params_capacity = 2 * count * params_stride;
       }
     }
+    // A slot's own targets pay off only when an image's passes could wait for another's copy.
+    flight.per_image_targets = options.per_image_targets && count > 1;
+    const uint32_t queries = uint32_t(1 + 3 * count);
+    if (status.ok() && options.profile_device && ctx->info().timestamp_valid_bits > 0 &&
+        (flight.timestamps == nullptr || flight.timestamps->count() < queries)) {
+      flight.timestamps.reset();
+      auto pool = gpu::TimestampQueryPool::Create(*ctx, queries);
+      status = pool.status();
+      if (status.ok()) {
+        flight.timestamps = std::make_unique<gpu::TimestampQueryPool>(std::move(pool).value());
+      }
+    }
     if (status.ok()) status = flight.cmd.Begin();
+    if (status.ok() && flight.timestamps != nullptr) {
+      status = flight.timestamps->Reset(flight.cmd);
+    }
     if (status.ok()) {
       // The parameter blocks travel in the command buffer (vkCmdUpdateBuffer), then every
       // shader stage waits for them.
@@ -1258,15 +1541,12 @@ Status VulkanRenderer::Impl::RenderPlans(const std::vector<ImagePlan>& all,
                             sizeof(sh::RenderParams), &plan.hires_params);
         }
       }
-      VkMemoryBarrier barrier{};
-      barrier.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
-      barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-      barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-      vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT,
-                           VK_PIPELINE_STAGE_VERTEX_SHADER_BIT |
-                               VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
-                               VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                           0, 1, &barrier, 0, nullptr, 0, nullptr);
+      RecordMemoryBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_VERTEX_SHADER_BIT |
+                              VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT |
+                              VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                          VK_ACCESS_SHADER_READ_BIT);
+      Stamp(flight, 0);
     }
     for (size_t k = 0; status.ok() && k < count; ++k) {
       status = RecordImage(flight, k, all[next + k]);
@@ -1325,6 +1605,8 @@ StatusOr<std::unique_ptr<VulkanRenderer>> VulkanRenderer::Create(
 const gpu::DeviceInfo& VulkanRenderer::device() const { return impl_->ctx->info(); }
 const VulkanRenderOptions& VulkanRenderer::options() const { return impl_->options; }
 const VulkanRenderStats& VulkanRenderer::last_stats() const { return impl_->stats; }
+bool VulkanRenderer::computes_shadow_maps() const { return impl_->ComputeShadowMaps(); }
+bool VulkanRenderer::resolves_pinhole_cameras() const { return impl_->ResolvePinhole(); }
 const VulkanBatchStats& VulkanRenderer::last_batch_stats() const { return impl_->batch_stats; }
 
 Status VulkanRenderer::SetScene(const ShadedScene& scene) {

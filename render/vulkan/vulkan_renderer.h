@@ -84,6 +84,28 @@ enum class ShadowMapKind {
 };
 const char* ShadowMapKindName(ShadowMapKind kind);
 
+// How shadow maps are drawn. Measured on an NVIDIA H200 (a compute GPU whose rasteriser is a
+// small part of the chip), a 1143² map of 19,200 triangles: 0.25 ms by the pass.
+enum class ShadowRaster {
+  kAuto,      // kCompute on GPUs; kGraphics on CPU devices (lavapipe)
+  kGraphics,  // the depth pass (shadow.vert + shadow.frag)
+  kCompute,   // a compute pass intersecting every texel's ray with the triangles
+              // (shadow_raster.comp): the same map up to rounding at triangle edges
+};
+
+// How pinhole cameras without lens distortion are shaded. On the H200 at 512 px (19,200
+// triangles): the camera pass with per-fragment shading and its copy to the host 0.61 ms, the
+// visibility pass and the resolve 0.28 ms. The resolve is not the default yet: where triangles
+// are smaller than a pixel (a 360 x 180 UV sphere at 96 px) the walk from the visibility image's
+// triangle can stop short of the one the ray meets (0.2 % shading error on the H200), and its
+// supersampled evidence for `reflcap render`'s automatic settings differs from the CPU's.
+enum class CameraShading {
+  kAuto,      // kFragment (see above)
+  kFragment,  // the camera pass shades every fragment (surface.frag); images are copied out
+  kResolve,   // as distorted cameras: a visibility pass (triangle ids), then a compute pass
+              // shades each pixel by its exact camera ray (distort_resolve.comp)
+};
+
 struct VulkanRenderOptions {
   // Point lights' shadow map (directional lights always get an orthographic map).
   ShadowMapKind shadow_map = ShadowMapKind::kAuto;
@@ -109,9 +131,11 @@ struct VulkanRenderOptions {
   // Distorted cameras: visibility-image texels per output pixel along each axis (1 or 2; 2 finds
   // sub-pixel triangles more often, at 4x the visibility pass).
   int visibility_scale = 1;
-  // Render pinhole cameras without distortion through the distortion path as well (visibility
-  // image + exact rays) instead of the per-fragment path: for tests and comparisons.
-  bool always_resolve = false;
+  // Pinhole cameras without distortion: per-fragment shading or the distortion path's visibility
+  // image + exact rays (CameraShading).
+  CameraShading camera_shading = CameraShading::kAuto;
+  // Shadow maps by the rasteriser or by compute (ShadowRaster).
+  ShadowRaster shadow_raster = ShadowRaster::kAuto;
   // Batching. Images recorded per submission: 0 = automatic — 1 on a CPU device (lavapipe: a
   // submission costs nothing there next to the rendering, and small steps overlap the host's
   // read-back and file writing best), else as many as fit batch_readback_mib, at most
@@ -123,6 +147,14 @@ struct VulkanRenderOptions {
   // Submissions in flight: while the host reads back batch k, the device renders k + 1 .. k + n - 1.
   // [1, 8].
   int batches_in_flight = 3;
+  // Images of a batch of several each get camera (or visibility) pass targets of their own, whose
+  // passes then need not wait for the earlier images' copies to the host: copies overlap later
+  // images' passes. Costs device memory of about 1.1x the batch's read-back memory per flight.
+  // Off (or a batch of one image): one target per size, shared by every image.
+  bool per_image_targets = true;
+  // Device timestamps around every image's phases (shadow map, camera pass, outputs), summed in
+  // VulkanBatchStats::device_*; for benchmarks (the timestamps can serialise the phases).
+  bool profile_device = false;
   // Device memory for kept shadow maps, MiB: an image whose light map (views and resolution: the
   // light and the object's pose in it) equals a kept one samples it instead of drawing it again.
   // 0 = keep none beyond the one being drawn (every image draws its own map). [0, 16384].
@@ -146,6 +178,7 @@ struct VulkanRenderStats {
   std::string shadow_map = "none";  // "none", "cube", "fitted", "orthographic"
   int shadow_resolution = 0;        // texels per side (per face for a cube map)
   bool shadow_map_reused = false;   // RenderImage: sampled a kept map instead of drawing one
+  bool shadow_map_computed = false; // drawn by compute (ShadowRaster), not the depth pass
   bool distortion_resolve = false;  // distorted camera: visibility image + exact rays
   int visibility_width = 0, visibility_height = 0;
   double seconds = 0;      // host wall clock of the whole call
@@ -167,6 +200,12 @@ struct VulkanBatchStats {
   double sink_s = 0;              // host: in the caller's sink
   size_t shadow_edge_pixels = 0;  // pixels shaded on the host at shadow-map edges
   double shadow_edge_s = 0;       // host: shading them (part of readback_s)
+  // VulkanRenderOptions::profile_device on a device with timestamps: the device's time over the
+  // submissions (first to last timestamp, summed) and its parts — each phase from the end of the
+  // one before it: shadow maps drawn (and the batch's start), camera or visibility passes,
+  // outputs (copies to the host, resolves, supersampled passes, normal-map dispatches).
+  bool device_timed = false;
+  double device_s = 0, device_shadow_s = 0, device_pass_s = 0, device_outputs_s = 0;
   std::string ToString() const;
 };
 
@@ -198,6 +237,10 @@ class VulkanRenderer {
 
   const gpu::DeviceInfo& device() const;
   const VulkanRenderOptions& options() const;
+  // What kAuto chose on this device: shadow maps drawn by compute (ShadowRaster), pinhole cameras
+  // shaded by the resolve pass (CameraShading).
+  bool computes_shadow_maps() const;
+  bool resolves_pinhole_cameras() const;
   const VulkanRenderStats& last_stats() const;
 
   // Uploads a mesh scene (geometry, atlas tangents, parameter maps); replaces any earlier scene.

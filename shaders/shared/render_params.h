@@ -86,6 +86,17 @@ REFLCAP_STD430_SIZE(RenderTriangle, 32);
 
 // The shadow pass pushes a LightMapPush (light_map_view.h).
 
+// Push constants of the compute rasteriser of shadow maps (shadow_raster.comp): one view (its
+// layer of the raster buffer), the map's resolution, the triangle count, and the dispatch's
+// workgroups along x (triangle = group.y * groups_x + group.x).
+struct ShadowRasterPush {
+  uint view;
+  uint resolution;
+  uint triangles;
+  uint groups_x;
+};
+REFLCAP_STD430_SIZE(ShadowRasterPush, 16);
+
 // Push constants of the supersampling box filter.
 struct DownsamplePush {
   uint width;   // output size

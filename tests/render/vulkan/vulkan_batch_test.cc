@@ -201,8 +201,9 @@ class VulkanBatch : public testing::VulkanRendererTest {
   // Renders `requests` one by one on the per-image path.
   std::vector<RenderResult> OneByOneResults(const ShadedScene& scene,
                                             const std::vector<RenderRequest>& requests,
-                                            const RenderOptions& options) {
-    auto r = VulkanRenderer::Create(Device(), OneByOne());
+                                            const RenderOptions& options,
+                                            const VulkanRenderOptions& one_by_one = OneByOne()) {
+    auto r = VulkanRenderer::Create(Device(), one_by_one);
     EXPECT_TRUE(r.ok()) << r.status().ToString();
     if (!r.ok()) return {};
     EXPECT_TRUE((*r)->SetScene(scene).ok());
@@ -271,6 +272,42 @@ TEST_F(VulkanBatch, ManyImagesInBatchesMatchOneByOneBitForBit) {
       }
     }
   }
+}
+
+// The paths a GPU takes by default (compute-drawn shadow maps, pinhole cameras shaded by the
+// resolve pass) batch as the rasterised ones do: bit for bit the one-by-one renders, with maps
+// redrawn while earlier images of the batch still sample them.
+TEST_F(VulkanBatch, ComputeShadowMapsAndResolvedCamerasBatchBitForBit) {
+  const auto scene = MakeOccluderScene();
+  const Rig rig = MakeRig();
+  const std::vector<RenderRequest> requests = AllRequests(rig);
+  auto gpu_paths = [](VulkanRenderOptions o) {
+    o.shadow_raster = ShadowRaster::kCompute;
+    o.camera_shading = CameraShading::kResolve;
+    return o;
+  };
+  RenderOptions options;
+  options.aux_buffers = true;
+  const std::vector<RenderResult> expected =
+      OneByOneResults(scene->shaded(), requests, options, gpu_paths(OneByOne()));
+  ASSERT_EQ(expected.size(), requests.size());
+  auto r = VulkanRenderer::Create(Device(), gpu_paths(Batched(3, 2, 1)));
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_TRUE((*r)->SetScene(scene->shaded()).ok());
+  size_t delivered = 0;
+  auto status = (*r)->RenderImages(requests, options, [&](size_t i, RenderResult&& result) {
+    ++delivered;
+    EXPECT_TRUE(SameBits(result, expected[i])) << "image " << i;
+    return OkStatus();
+  });
+  ASSERT_TRUE(status.ok()) << status.ToString();
+  EXPECT_EQ(delivered, requests.size());
+  const VulkanBatchStats& stats = (*r)->last_batch_stats();
+  std::printf("[ vulkan   ] batches (compute maps, resolve shading): %s\n",
+              stats.ToString().c_str());
+  EXPECT_TRUE((*r)->last_stats().shadow_map_computed);
+  EXPECT_TRUE((*r)->last_stats().distortion_resolve);
+  EXPECT_GT(stats.shadow_maps_drawn, rig.poses.size() * rig.lights.size());  // redrawn
 }
 
 TEST_F(VulkanBatch, ManyImageSizesReleaseKeptTargetsWithoutChangingResults) {
