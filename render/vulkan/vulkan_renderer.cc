@@ -448,7 +448,10 @@ struct VulkanRenderer::Impl {
     return options.shadow_raster == ShadowRaster::kCompute ||
            (options.shadow_raster == ShadowRaster::kAuto && !IsCpuDevice());
   }
-  bool ResolvePinhole() const { return options.camera_shading == CameraShading::kResolve; }
+  bool ResolvePinhole() const {
+    return options.camera_shading == CameraShading::kResolve ||
+           (options.camera_shading == CameraShading::kAuto && !IsCpuDevice());
+  }
   // Records drawing image k's shadow map `shadow` by compute (shadow_raster.comp).
   Status RecordComputeShadowMap(Flight& flight, size_t k, const ImagePlan& plan,
                                 CachedTarget& shadow);
@@ -773,10 +776,20 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
     const double vfx = fx * scale, vfy = fy * scale, vs = s * scale;
     const double u0 = std::min({vfx * xmin + vs * ymin, vfx * xmin + vs * ymax});
     const double u1 = std::max({vfx * xmax + vs * ymin, vfx * xmax + vs * ymax});
-    const double vcx = kVisibilityMargin - u0;
-    const double vcy = kVisibilityMargin - vfy * ymin;
-    const double width_d = std::ceil(u1 - u0) + 2 * kVisibilityMargin + 1;
-    const double height_d = std::ceil(vfy * (ymax - ymin)) + 2 * kVisibilityMargin + 1;
+    double vcx = kVisibilityMargin - u0;
+    double vcy = kVisibilityMargin - vfy * ymin;
+    double width_d = std::ceil(u1 - u0) + 2 * kVisibilityMargin + 1;
+    double height_d = std::ceil(vfy * (ymax - ymin)) + 2 * kVisibilityMargin + 1;
+    if (!camera.HasDistortion()) {
+      // A pinhole camera shaded by the resolve (CameraShading::kResolve): pixel x lands at
+      // visibility x scale - cx scale + vcx, so whole texels beside its centre when vcx - cx scale
+      // is whole; then the texel under a pixel centre holds the rasteriser's own answer for that
+      // ray (distort_resolve.comp falls back on it). Up to a texel more of margin on each axis.
+      vcx = scale * cx + std::ceil(vcx - scale * cx);
+      vcy = scale * cy + std::ceil(vcy - scale * cy);
+      width_d += 1;
+      height_d += 1;
+    }
     if (!(finite && width_d >= 1 && height_d >= 1 && width_d <= kMaxVisibilitySide &&
           height_d <= kMaxVisibilitySide &&
           width_d <= kMaxVisibilityRatio * scale * w + 64 &&
