@@ -1259,6 +1259,13 @@ Status VulkanRenderer::Impl::RecordComputeShadowMap(Flight& flight, size_t k,
     }
   }
   const uint64_t bytes = uint64_t(res) * res * layers * sizeof(uint32_t);
+  if (bytes > c.info().max_storage_buffer_range) {
+    return UnavailableError("a compute-drawn ", res, "² shadow map of ", layers,
+                            " views needs a storage buffer of ", bytes, " bytes, more than ",
+                            c.info().name, " binds (maxStorageBufferRange ",
+                            c.info().max_storage_buffer_range,
+                            "): use ShadowRaster::kGraphics or a lower resolution");
+  }
   if (raster_buffer == nullptr || raster_buffer->size() < bytes) {
     if (raster_buffer != nullptr) retired_raster_buffers.push_back(std::move(raster_buffer));
     REFLCAP_ASSIGN_OR_RETURN(Buffer b, Buffer::Create(c, bytes, gpu::MemoryKind::kDevice));

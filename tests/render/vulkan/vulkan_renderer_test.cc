@@ -372,8 +372,9 @@ TEST_F(VulkanRendererScenes, ShadowEdgesAreTheCpusWithACoarseShadowMap) {
 
 // Compute-drawn shadow maps on a device that stops long loops silently (lavapipe: 65,000 steps an
 // invocation) refuse a triangle whose box of map texels is too large for one workgroup, instead of
-// drawing part of it; a device without that limit draws it (and matches the CPU).
-TEST_F(VulkanRendererScenes, ComputeShadowMapsRefuseTrianglesTooLargeForTheLoopLimit) {
+// drawing part of it; a device without that limit draws it (and matches the CPU). Likewise a map
+// too large for one storage-buffer binding.
+TEST_F(VulkanRendererScenes, ComputeShadowMapsRefuseWhatTheDeviceCannotDraw) {
   // Two triangles over a whole 4096² map: ~8 M texels each, 262,144 per invocation of 32.
   Scene s = MakeScene(reflcap::testing::MakeGridPlane(2, 2, 1, 1), Lambert({0.5f, 0.5f, 0.5f}),
                       16);
@@ -404,6 +405,22 @@ TEST_F(VulkanRendererScenes, ComputeShadowMapsRefuseTrianglesTooLargeForTheLoopL
     ASSERT_TRUE(small.ok());
     ASSERT_TRUE((*small)->SetScene(s.shaded()).ok());
     EXPECT_TRUE((*small)->RenderImage(cam, light, Rigid3(), 1.0, WithAux()).ok());
+  }
+  // A map whose raster buffer exceeds one storage-buffer binding is refused the same way (small
+  // triangles, so the loop limit is not what stops it).
+  Scene fine = MakeScene(reflcap::testing::MakeGridPlane(2, 2, 64, 64),
+                         Lambert({0.5f, 0.5f, 0.5f}), 16);
+  vo.shadow_resolution = 8192;  // 256 MiB of raster buffer
+  auto big = VulkanRenderer::Create(device ? device : "", vo);
+  ASSERT_TRUE(big.ok()) << big.status().ToString();
+  ASSERT_TRUE((*big)->SetScene(fine.shaded()).ok());
+  auto rendered = (*big)->RenderImage(cam, light, Rigid3(), 1.0, WithAux());
+  if ((*big)->device().max_storage_buffer_range < (uint64_t{256} << 20)) {
+    EXPECT_EQ(rendered.status().code(), StatusCode::kUnavailable) << rendered.status().ToString();
+    EXPECT_NE(rendered.status().message().find("maxStorageBufferRange"), std::string::npos)
+        << rendered.status().ToString();
+  } else {
+    EXPECT_TRUE(rendered.ok()) << rendered.status().ToString();
   }
 }
 
