@@ -1295,6 +1295,9 @@ Status VulkanRenderer::Impl::RecordComputeShadowMap(Flight& flight, size_t k,
                       VK_PIPELINE_STAGE_TRANSFER_BIT,
                       VK_ACCESS_MEMORY_READ_BIT | VK_ACCESS_MEMORY_WRITE_BIT);
   gpu::DeviceImage& map = *shadow.target->depth;
+  // From UNDEFINED whatever the tracked layout says (every texel is rewritten; and a batch
+  // abandoned after recording leaves the tracked layout unsubmitted).
+  map.set_layout(VK_IMAGE_LAYOUT_UNDEFINED);
   map.TransitionTo(cb, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL);
   // Every texel starts at 1.0 (the pass's depth clear: nothing before the distance scale).
   constexpr uint32_t kOneBits = 0x3F800000u;
