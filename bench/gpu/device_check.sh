@@ -6,9 +6,9 @@
 # prints a summary. 156 s on an H200 host at 01841b1 (tests 60 s, synth 21 s, run 35 s, fits
 # 11 s, benchmarks 23 s); 207 s at 7447d4e, with the fit at 4 and 8 threads beside 16 and 64 MiB
 # transfers over 4-32 MiB staging pieces; since then also the photographs' read and decode rates
-# (~10 s). BM_FitTexelsVulkanStaged runs beside BM_FitTexelsVulkan: the fit's records through
-# the staging ring against mapped device memory. Record every number with the device line it
-# prints.
+# (~10 s), and the render variants (183-213 s in all at bb5f5f6-b7f27cc).
+# BM_FitTexelsVulkanStaged runs beside BM_FitTexelsVulkan: the fit's records through the staging
+# ring against mapped device memory. Record every number with the device line it prints.
 set -u
 : "${BUILD:?source .gpu/run-prologue.sh first}" "${OUT:?run through the device tool (OUT unset)}"
 R=$BUILD/bin/reflcap

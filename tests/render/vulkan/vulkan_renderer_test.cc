@@ -247,7 +247,7 @@ TEST_F(VulkanRendererScenes, KnownOccluderUnderEveryShadowMapMatchesCpu) {
     LightType type;
     Vec3d where;  // point light position or directional light direction
     ShadowMapKind kind;
-    bool always_resolve;  // through the distortion path (visibility image + exact rays)
+    bool resolve;  // CameraShading::kResolve: visibility image + exact rays
     const char* expect_map;
   };
   const Vec3d inside(0.2, 0.1, 1.0), outside(0.3, -0.3, 1.9);
@@ -276,7 +276,7 @@ TEST_F(VulkanRendererScenes, KnownOccluderUnderEveryShadowMapMatchesCpu) {
     SCOPED_TRACE(StrCat(c.name, raster == ShadowRaster::kCompute ? ", compute-drawn map" : ""));
     VulkanRenderOptions vo;
     vo.shadow_map = c.kind;
-    vo.camera_shading = c.always_resolve ? CameraShading::kResolve : CameraShading::kFragment;
+    vo.camera_shading = c.resolve ? CameraShading::kResolve : CameraShading::kFragment;
     vo.shadow_raster = raster;
     const char* device = std::getenv("REFLCAP_TEST_VK_DEVICE");
     auto r = VulkanRenderer::Create(device ? device : "", vo);
@@ -325,7 +325,7 @@ TEST_F(VulkanRendererScenes, ShadowEdgesAreTheCpusWithACoarseShadowMap) {
   struct Case {
     const char* name;
     int supersampling;
-    bool always_resolve;
+    bool resolve;  // CameraShading::kResolve
     ShadowRaster raster;
   };
   for (const Case c : {Case{"1 ray", 1, false, ShadowRaster::kGraphics},
@@ -341,7 +341,7 @@ TEST_F(VulkanRendererScenes, ShadowEdgesAreTheCpusWithACoarseShadowMap) {
     for (const bool exact : {false, true}) {
       VulkanRenderOptions vo;
       vo.shadow_resolution = 64;
-      vo.camera_shading = c.always_resolve ? CameraShading::kResolve : CameraShading::kFragment;
+      vo.camera_shading = c.resolve ? CameraShading::kResolve : CameraShading::kFragment;
       vo.shadow_raster = c.raster;
       vo.exact_shadow_edges = exact;
       const char* device = std::getenv("REFLCAP_TEST_VK_DEVICE");
