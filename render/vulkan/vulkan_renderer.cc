@@ -1192,12 +1192,15 @@ Status VulkanRenderer::Impl::RecordMeshImage(Flight& flight, size_t k, const Ima
 
 namespace {
 
+// shadow_raster.comp's local_size_x: the invocations that share a triangle's texels.
+constexpr uint64_t kRasterWorkgroup = 32;
+
 // The most map texels one invocation of shadow_raster.comp visits for `mesh` in the views of
-// `params` (resolution `res`): a triangle's bounding box over the workgroup's 32 invocations,
-// the whole map for a triangle reaching behind a view's near plane (as the shader's box may).
+// `params` (resolution `res`): a triangle's bounding box (the shader's texel range, computed the
+// same way) over the workgroup's invocations; the whole map for a triangle reaching behind a
+// view's near plane, where the shader clips and this bound does not (an over-estimate).
 uint64_t MostRasterTexelsPerInvocation(const TriangleMesh& mesh, const sh::RenderParams& params,
                                        uint32_t views, uint32_t res) {
-  constexpr uint64_t kWorkgroup = 32;  // shadow_raster.comp local_size_x
   uint64_t most = 0;
   for (uint32_t v = 0; v < views; ++v) {
     const sh::vec4* rows = params.views[v].clip_from_object;
@@ -1232,7 +1235,7 @@ uint64_t MostRasterTexelsPerInvocation(const TriangleMesh& mesh, const sh::Rende
         }
         texels = side[0] * side[1];
       }
-      most = std::max(most, (texels + kWorkgroup - 1) / kWorkgroup);
+      most = std::max(most, (texels + kRasterWorkgroup - 1) / kRasterWorkgroup);
     }
   }
   return most;
@@ -1252,7 +1255,8 @@ Status VulkanRenderer::Impl::RecordComputeShadowMap(Flight& flight, size_t k,
     const uint64_t most =
         MostRasterTexelsPerInvocation(mesh_scene.scene->mesh(), plan.params, layers, res);
     if (gpu::LoopSteps(most) > budget) {
-      return UnavailableError("a triangle covers up to ", most * 32, " texels of a ", res,
+      return UnavailableError("a triangle covers up to ", most * kRasterWorkgroup,
+                              " texels of a ", res,
                               "² shadow map, more than compute-drawn maps can visit on ",
                               c.info().name, " (", budget,
                               " loop steps per invocation): use ShadowRaster::kGraphics");

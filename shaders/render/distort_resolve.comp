@@ -15,7 +15,7 @@
 // object's image only, the least-missed candidate's plane, or for a sample on a texel centre the
 // plane of the triangle the rasteriser put there.
 // Pinhole cameras without distortion take this path too with VulkanRenderOptions::camera_shading
-// kResolve.
+// kResolve (what kAuto picks on GPUs).
 //
 // Bindings (set 0): 0 RenderParams, 1 RenderCorner[], 2 RenderTriangle[], 3 material, 4 frame,
 //   5 shadow map (render/render_inputs.glsl); 6 visibility (usampler2DArray, R32_UINT: triangle
@@ -39,10 +39,18 @@ layout(std430, set = 0, binding = 8) writeonly buffer OutAux { vec4 out_aux[]; }
 // Visibility texels searched around the ray's landing point, in each direction.
 const int kSearchRadius = 1;
 const int kMaxCandidates = (2 * kSearchRadius + 1) * (2 * kSearchRadius + 1);
-// Triangles a walk crosses from a candidate before giving up.
-// (8 stopped short of the hit on a 360 x 180 UV sphere at 96 px, whose pole fans are slivers:
-// 0.2 % shading error there.)
+// Triangles a walk crosses from a candidate before giving up: up to kMaxWalkSteps (8 stopped
+// short of the hit on a 360 x 180 UV sphere at 96 px, whose pole fans are slivers: 0.2 % shading
+// error there), fewer when many samples share an invocation, so that a pixel's walks stay inside
+// lavapipe's 65,535 loop steps an invocation (engine/gpu/device_info.h) beside its other loops:
+// kWalkStepBudget over the (N² + 1) samples' kMaxCandidates walks — 64 up to N = 5, 13 at
+// N = 16. The same count on every device, so lavapipe and GPUs resolve alike.
 const int kMaxWalkSteps = 64;
+const uint kWalkStepBudget = 32000u;
+int WalkSteps() {
+  uint samples = params.supersampling * params.supersampling + 1u;
+  return min(kMaxWalkSteps, int(kWalkStepBudget / (samples * uint(kMaxCandidates))));
+}
 // How far (texels) a sample may lie from a visibility texel's centre and still count as on it:
 // the float rounding of the undistortion and the pixel -> texel mapping, far below a texel.
 const float kTexelCentreSlack = 1e-3;
@@ -64,7 +72,7 @@ float MinComponent(vec3 b) { return min(b.x, min(b.y, b.z)); }
 
 // The triangle the ray (o, d) hits, found from the triangles the visibility image shows around
 // `vis_pixel` (see the file comment): from each candidate, a walk across the edge the ray's plane
-// hit lies beyond (RenderTriangle::neighbours), up to kMaxWalkSteps triangles, until a triangle
+// hit lies beyond (RenderTriangle::neighbours), up to WalkSteps() triangles, until a triangle
 // contains the hit — which finds sub-texel triangles on connected surfaces, such as the sliver of
 // a bump's flank seen at grazing angle in front of the surface the texels show. The nearest hit
 // found wins. If none is found — only deep inside the object's image (every searched texel
@@ -87,6 +95,7 @@ Hit FindHit(vec3 o, vec3 d, vec2 vis_pixel) {
       if (!seen) ids[count++] = id;
     }
   }
+  const int walk_steps = WalkSteps();
   Hit best;
   best.found = false;
   float best_t = 3.0e38;
@@ -95,7 +104,7 @@ Hit FindHit(vec3 o, vec3 d, vec2 vis_pixel) {
   float outside_score = -3.0e38;
   for (int i = 0; i < count; ++i) {
     uint tri = ids[i] - 1u;
-    for (int step = 0; step < kMaxWalkSteps; ++step) {
+    for (int step = 0; step < walk_steps; ++step) {
       float t;
       vec3 b;
       if (!IntersectPlane(o, d, tri, t, b) || !(t > 0.0)) break;

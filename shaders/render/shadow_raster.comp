@@ -19,7 +19,7 @@
 #define REFLCAP_RENDER_CORNERS
 #include "render/render_inputs.glsl"
 
-layout(local_size_x = 32) in;
+layout(local_size_x = 32) in;  // kRasterWorkgroup in vulkan_renderer.cc
 
 layout(std430, set = 0, binding = 11) buffer RasterBlock { uint raster[]; };
 layout(push_constant) uniform Push { ShadowRasterPush push; };
@@ -56,7 +56,8 @@ void main() {
   }
   if (!(lo.x <= hi.x && lo.y <= hi.y)) return;  // wholly behind the near plane (or NaN)
   // Texels whose centres ((i + 0.5) / res * 2 - 1) may lie inside, one more on each side for the
-  // rounding of the projection (the ray test decides), clamped to the map.
+  // rounding of the projection (the ray test decides), clamped to the map. C++ twin of this range
+  // (the loop-limit check on lavapipe): MostRasterTexelsPerInvocation, vulkan_renderer.cc.
   float res = float(push.resolution);
   vec2 first = clamp(floor((lo * 0.5 + 0.5) * res - 0.5), vec2(0.0), vec2(res - 1.0));
   vec2 last = clamp(ceil((hi * 0.5 + 0.5) * res - 0.5), vec2(0.0), vec2(res - 1.0));
