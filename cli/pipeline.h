@@ -25,6 +25,7 @@ struct PipelineOptions {
   int indirect_bounces = 2, indirect_rays = 64;
   // The holdout render's pixel model (--supersample N|auto; render::kAutoSupersampling = auto).
   int supersampling = render::kAutoSupersampling;
+  double pixel_footprint = render::kAutoPixelFootprint;  // --pixel-footprint W|auto
   // Normal-map captures: the holdout render's point spread (--psf auto|none|SIGMA).
   double psf_sigma_px = render::kAutoPsf;
   // Normal-map captures: the holdout render's height field (--height-field auto|ls|l1); the

@@ -22,6 +22,7 @@ int RunRender(int argc, char** argv) {
   std::string capture_path, fit, out, split = "holdout", backend = "cpu", device, shadow_map;
   int writers = 0, indirect_bounces = 2, indirect_rays = 64;
   std::string indirect = "auto", supersample = "auto", psf = "auto", height_field = "auto";
+  std::string footprint = "auto";
   bool no_shadows = false, no_height_shadows = false, overwrite = false;
   ArgParser args(
       "render", "CAPTURE FIT --out DIR [--split holdout|train|all] [--backend cpu|vulkan] [options]",
@@ -48,6 +49,11 @@ int RunRender(int argc, char** argv) {
                  "N x N rays per pixel averaged over it (a box filter), 1..16, or auto (default): "
                  "4 x 4 when the train photographs integrate over their pixels, else 1 (the pixel "
                  "centre); mesh captures");
+  args.AddString("pixel-footprint", &footprint, "W|auto",
+                 "mesh captures: the square, W px wide (1..4), that a pixel's N x N rays cover: "
+                 "1 = the pixel, wider = the pixel also sees light from beside it (lens blur, a "
+                 "path tracer's filter); auto (default): with --supersample auto the train "
+                 "photographs decide, else 1");
   args.AddString("psf", &psf, "auto|none|SIGMA",
                  "normal-map captures: the photographs' point spread, a Gaussian of SIGMA px "
                  "(0..4) applied within the mask; auto (default: the train photographs decide) "
@@ -98,6 +104,9 @@ int RunRender(int argc, char** argv) {
   }
   const StatusOr<int> supersampling = render::ParseSupersampling(supersample, "--supersample");
   if (!supersampling.ok()) return usage(supersampling.status().message());
+  const StatusOr<double> pixel_footprint =
+      render::ParsePixelFootprint(footprint, "--pixel-footprint");
+  if (!pixel_footprint.ok()) return usage(pixel_footprint.status().message());
   const StatusOr<double> psf_sigma = render::ParsePsf(psf, "--psf");
   if (!psf_sigma.ok()) return usage(psf_sigma.status().message());
   const auto height_choice = render::ParseHeightFieldChoice(height_field, "--height-field");
@@ -118,6 +127,7 @@ int RunRender(int argc, char** argv) {
   render::CaptureRenderOptions options;
   options.split = *selection;
   options.supersampling = *supersampling;
+  options.pixel_footprint = *pixel_footprint;
   options.psf_sigma_px = *psf_sigma;
   options.height_field = *height_choice;
   options.cast_shadows = !no_shadows;

@@ -125,6 +125,7 @@ StatusOr<PipelineSummary> RunPipeline(const fs::path& capture_path, const fs::pa
   render_options.indirect_bounces = options.indirect_bounces;
   render_options.indirect_rays = options.indirect_rays;
   render_options.supersampling = options.supersampling;
+  render_options.pixel_footprint = options.pixel_footprint;
   render_options.psf_sigma_px = options.psf_sigma_px;
   render_options.height_field = options.height_field;
   // Validation scores each holdout image as its files are written, from memory: decoding them
@@ -201,6 +202,11 @@ int RunRun(int argc, char** argv) {
   args.AddString("supersample", &supersample, "N|auto",
                  "holdout render: N x N rays per pixel averaged over it, 1..16, or auto (default: "
                  "4 x 4 when the train photographs integrate over their pixels, else 1)");
+  std::string footprint = "auto";
+  args.AddString("pixel-footprint", &footprint, "W|auto",
+                 "holdout render, mesh captures: the square, W px wide (1..4), that a pixel's "
+                 "rays cover; auto (default: with --supersample auto the train photographs "
+                 "decide, else 1)");
   std::string psf = "auto";
   args.AddString("psf", &psf, "auto|none|SIGMA",
                  "holdout render, normal-map captures: the photographs' point spread, a Gaussian "
@@ -257,6 +263,7 @@ int RunRun(int argc, char** argv) {
     const auto filter = resample::ParsePixelFilter(pixel_filter);
     const auto supersampling = render::ParseSupersampling(supersample, "--supersample");
     const auto mode = render::ParseIndirectMode(indirect, "--indirect");
+    const auto pixel_footprint = render::ParsePixelFootprint(footprint, "--pixel-footprint");
     const auto psf_sigma = render::ParsePsf(psf, "--psf");
     const auto height_choice = render::ParseHeightFieldChoice(height_field, "--height-field");
     // The render stage's ranges, checked before any stage runs.
@@ -264,7 +271,8 @@ int RunRun(int argc, char** argv) {
     render_check.indirect_bounces = options.indirect_bounces;
     render_check.indirect_rays = options.indirect_rays;
     for (const Status& s : {point.status(), filter.status(), supersampling.status(),
-                            mode.status(), psf_sigma.status(), height_choice.status(),
+                            mode.status(), pixel_footprint.status(), psf_sigma.status(),
+                            height_choice.status(),
                             render_check.Validate()}) {
       if (!s.ok()) {
         std::fprintf(stderr, "reflcap run: %s\n", s.message().c_str());
@@ -274,6 +282,7 @@ int RunRun(int argc, char** argv) {
     options.resample.sample_point = *point;
     options.resample.pixel_filter = *filter;
     options.supersampling = *supersampling;
+    options.pixel_footprint = *pixel_footprint;
     options.indirect = *mode;
     options.psf_sigma_px = *psf_sigma;
     options.height_field = *height_choice;

@@ -26,6 +26,8 @@ void AddSynthOptions(ArgParser* args, synth::SynthOptions* o, std::string* mater
   args->AddInt("lights", &o->lights, "point lights (default: preset)");
   args->AddInt("steps", &o->steps, "turntable steps over 360 degrees (default: preset)");
   args->AddInt("supersample", &o->supersampling, "N x N samples per pixel (default 1)");
+  args->AddDouble("pixel-footprint", &o->pixel_footprint,
+                  "the square, in pixels (1..4), that those samples cover (default 1: the pixel)");
   args->AddString("materials", materials, "LIST",
                   "comma-separated subset of matte, glossy, sharp_highlight, anisotropic, "
                   "coloured_texture, coloured_lobe (default: all six)");

@@ -258,7 +258,10 @@ Status SynthOptions::Validate() const {
   if (cameras < 0 || cameras > 64) return InvalidArgumentError("--cameras: must be in [1, 64]");
   if (lights < 0 || lights > 256) return InvalidArgumentError("--lights: must be in [1, 256]");
   if (steps < 0 || steps > 360) return InvalidArgumentError("--steps: must be in [1, 360]");
-  return render::RenderOptions{supersampling, true}.Validate();
+  render::RenderOptions render_options;
+  render_options.supersampling = supersampling;
+  render_options.pixel_footprint = pixel_footprint;
+  return render_options.Validate();
 }
 
 StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const fs::path& out) {
@@ -382,6 +385,7 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
   const render::ShadedScene shaded{scene.get(), &atlas, &gt};
   render::RenderOptions render_options;
   render_options.supersampling = options.supersampling;
+  render_options.pixel_footprint = options.pixel_footprint;
   const double read_sigma = kReadNoiseRatio * options.noise;
   Progress progress("synth: rendering", int64_t(capture.images.size()));
   // Files are compressed and written by a pool while the next photographs render (a million-texel
@@ -455,7 +459,8 @@ StatusOr<SynthSummary> WriteSyntheticCapture(const SynthOptions& options, const 
       {"note", "Synthetic capture rendered by reflcap's CPU reference renderer (direct light, cast "
                "shadows, no interreflection) from Lambert + Lafortune ground truth."},
       {"generator", {{"name", "reflcap synth"}, {"preset", preset.name}, {"seed", options.seed},
-                     {"supersampling", options.supersampling}}},
+                     {"supersampling", options.supersampling},
+                     {"pixel_footprint", options.pixel_footprint}}},
       {"brdf_convention", "f_c(wi, wo) = rho_d.c / pi + sum_k max(0, Cx wix wox + Cy wiy woy + "
                           "Cz wiz woz)^n in the texel tangent frame (z = shading normal, x = "
                           "tangent along +u)"},

@@ -37,6 +37,7 @@ struct SynthOptions {
   int lights = 0;         // point lights
   int steps = 0;          // turntable steps over 360°
   int supersampling = 1;  // N x N samples per pixel in the renderer
+  double pixel_footprint = 1;  // the square (px) those samples cover (RenderOptions)
   // The materials the object's regions draw from, by name (kSynthMaterialNames); empty = all six.
   // A subset makes a capture of only what a test or benchmark needs (e.g. no sharp highlight).
   std::vector<std::string> materials;

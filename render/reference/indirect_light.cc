@@ -164,6 +164,7 @@ std::vector<Vec3f> IndirectLight::TexelRadiance(const RayScene& scene, const Tex
 
 void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Camera& camera,
                       const Rigid3& world_from_object, double exposure_s, int supersampling,
+                      double footprint,
                       const std::vector<Vec3f>& radiance, Image* pixels) {
   REFLCAP_CHECK(pixels->width == camera.width && pixels->height == camera.height &&
                 pixels->channels == 3);
@@ -188,7 +189,7 @@ void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Came
         } else {
           for (int sy = 0; sy < n; ++sy) {
             for (int sx = 0; sx < n; ++sx) {
-              sum += trace(x + (sx + 0.5) / n - 0.5, double(y) + (sy + 0.5) / n - 0.5);
+              sum += trace(x + SampleOffset(sx, n, footprint), double(y) + SampleOffset(sy, n, footprint));
             }
           }
         }

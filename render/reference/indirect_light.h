@@ -71,10 +71,12 @@ class IndirectLight {
 };
 
 // Adds exposure_s · radiance[texel under the ray] to `pixels` (3 channels, the camera's size) for
-// the rays RenderImage traces with the same `supersampling`: the pixel centre at 1, the centres of
-// N×N strata averaged otherwise. Pixels whose rays miss (or hit a back face) are unchanged.
+// the rays RenderImage traces with the same `supersampling` and `footprint`: the pixel centre at
+// 1, the centres of N×N strata of the footprint averaged otherwise (SampleOffset). Pixels whose
+// rays miss (or hit a back face) are unchanged.
 void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Camera& camera,
                       const Rigid3& world_from_object, double exposure_s, int supersampling,
+                      double footprint,
                       const std::vector<Vec3f>& radiance, Image* pixels);
 
 }  // namespace reflcap::render

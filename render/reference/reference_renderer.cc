@@ -39,6 +39,10 @@ Status RenderOptions::Validate() const {
     return InvalidArgumentError("supersampling must be in [1, ", kMaxSupersampling, "], got ",
                                 supersampling);
   }
+  if (!(pixel_footprint >= 1 && pixel_footprint <= kMaxPixelFootprint)) {
+    return InvalidArgumentError("pixel footprint must be in [1, ", kMaxPixelFootprint,
+                                "] px, got ", pixel_footprint);
+  }
   return OkStatus();
 }
 
@@ -61,6 +65,7 @@ class ImageShader {
         intensity_(light.intensity.cast<float>()),
         offset_(scene_.SurfaceOffset()),
         n_(options.supersampling),
+        footprint_(options.pixel_footprint),
         sample_weight_(float(exposure_s) / float(n_ * n_)) {
     const Rigid3 object_from_world = world_from_object.Inverse();
     light_in_object_ = (object_from_world * light.position).cast<float>();
@@ -93,8 +98,8 @@ class ImageShader {
       }
       for (int sy = 0; sy < n_; ++sy) {
         for (int sx = 0; sx < n_; ++sx) {
-          // Stratum centres: offsets (i + 0.5)/n - 0.5 within the pixel.
-          Shade(x + (sx + 0.5) / n_ - 0.5, double(y) + (sy + 0.5) / n_ - 0.5, &radiance, nullptr);
+          Shade(x + SampleOffset(sx, n_, footprint_), double(y) + SampleOffset(sy, n_, footprint_),
+                &radiance, nullptr);
           sum += radiance;
         }
       }
@@ -188,6 +193,7 @@ class ImageShader {
   const Vec3f intensity_;
   const float offset_;
   const int n_;
+  const double footprint_;
   const float sample_weight_;
   std::vector<float> own_curvature_;
   const std::vector<float>* curvature_ = nullptr;

@@ -53,10 +53,24 @@ struct RenderOptions {
   // Also fill RenderResult::aux (costs about one more shading sample per pixel when
   // supersampling > 1; nothing extra at 1).
   bool aux_buffers = false;
+  // Side of the square the N×N samples cover, in pixels, centred on the pixel: 1 = the pixel's own
+  // area; wider = the pixel also integrates light from beside it, as a camera's optics and a path
+  // tracer's reconstruction filter make it (suzanne's Cycles photographs: 1.5). Range [1,
+  // kMaxPixelFootprint]; with N = 1 the one sample stays at the centre whatever the footprint.
+  double pixel_footprint = 1;
   Status Validate() const;
 };
 
 constexpr int kMaxSupersampling = 16;
+// A footprint beyond 4 px is a blurred image, not a pixel model.
+constexpr double kMaxPixelFootprint = 4;
+
+// Offset from the pixel centre of sample i of n along one axis: the centre of stratum i of the
+// footprint, ((i + 0.5) / n − 0.5) · footprint (0 for n = 1). Every backend samples here
+// (distort_resolve.comp, indirect_light.cc).
+inline double SampleOffset(int i, int n, double footprint) {
+  return ((i + 0.5) / n - 0.5) * footprint;
+}
 
 // Channels of RenderResult::aux, evaluated at the pixel centre; 0 on the background. The order is
 // alphabetical by name, which is the order OpenEXR stores (and ReadExrChannels returns) them.

@@ -656,7 +656,23 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
   plan.exposure_s = exposure_s;
   plan.options = options;
   const int w = camera.width, h = camera.height, n = options.supersampling;
-  const bool distorted = pinhole && (camera.HasDistortion() || ResolvePinhole());
+  REFLCAP_RETURN_IF_ERROR(options.Validate());
+  // Samples spread over more than the pixel (RenderOptions::pixel_footprint) sit off the
+  // supersampled pass's grid: only the resolve takes them, by their exact rays.
+  const bool wide_footprint = n > 1 && options.pixel_footprint != 1;
+  if (wide_footprint && !pinhole) {
+    return InvalidArgumentError("camera "", camera.id, "": a pixel footprint of ",
+                                options.pixel_footprint,
+                                " px needs a pinhole camera on the Vulkan renderer (orthographic "
+                                "cameras are rasterised on the pixel grid)");
+  }
+  if (wide_footprint && this->options.camera_shading == CameraShading::kFragment) {
+    return InvalidArgumentError("camera_shading fragment samples the pixel grid only; a pixel "
+                                "footprint of ", options.pixel_footprint,
+                                " px needs the resolve (camera_shading auto or resolve)");
+  }
+  const bool distorted =
+      pinhole && (camera.HasDistortion() || ResolvePinhole() || wide_footprint);
   const bool point_light = light.type == LightType::kPoint;
   plan.width = w;
   plan.height = h;
@@ -699,7 +715,9 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
   p.light = point_light ? V4(light_in_object, 1) : V4(light_dir_in_object, 0);
   p.intensity = V4(light.intensity, exposure_s);
   p.intrinsics = {float(fx), float(fy), float(cx), float(cy)};
-  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 1, 0};  // z: 1 sample per side
+  // z: 1 sample per side; w: the footprint the resolve spreads its N x N samples over.
+  p.intrinsics_extra = {float(s), float(camera.pixel_size_m), 1,
+                        float(n > 1 ? options.pixel_footprint : 1.0)};
   p.distortion = {float(camera.dist[0]), float(camera.dist[1]), float(camera.dist[2]),
                   float(camera.dist[3])};
   p.distortion_extra = {float(camera.dist[4]), 0, 0, 0};
@@ -764,13 +782,19 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
       ymin = std::min(ymin, xy.y());
       ymax = std::max(ymax, xy.y());
     };
+    // The border of what the samples reach: the pixels' edges, or their footprints' (wider).
+    const double half = 0.5 * (n > 1 ? std::max(1.0, options.pixel_footprint) : 1.0);
     for (int x = 0; x <= w; ++x) {
-      extend(x - 0.5, -0.5);
-      extend(x - 0.5, h - 0.5);
+      const double u = std::min(x - half, w - 1 + half);
+      extend(u, -half);
+      extend(u, h - 1 + half);
     }
+    extend(w - 1 + half, -half);
+    extend(w - 1 + half, h - 1 + half);
     for (int y = 0; y <= h; ++y) {
-      extend(-0.5, y - 0.5);
-      extend(w - 0.5, y - 0.5);
+      const double v = std::min(y - half, h - 1 + half);
+      extend(-half, v);
+      extend(w - 1 + half, v);
     }
     const int scale = vo.visibility_scale;
     const double vfx = fx * scale, vfy = fy * scale, vs = s * scale;

@@ -192,8 +192,9 @@ void main() {
     sum = vec3(0.0);
     for (uint sy = 0u; sy < n; ++sy) {
       for (uint sx = 0u; sx < n; ++sx) {
-        // Stratum centres: offsets (i + 0.5) / n - 0.5 within the pixel, as the CPU renderer.
-        vec2 offset = (vec2(sx, sy) + 0.5) / float(n) - 0.5;
+        // Stratum centres of the pixel's footprint (intrinsics_extra.w px square, 1 = the pixel):
+        // ((i + 0.5) / n - 0.5) x footprint, as the CPU renderer (SampleOffset).
+        vec2 offset = ((vec2(sx, sy) + 0.5) / float(n) - 0.5) * params.intrinsics_extra.w;
         Sample s = TraceSample(vec2(px) + offset);
         sum += s.radiance;
         edge = edge || s.shadow_edge;

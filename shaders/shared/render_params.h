@@ -35,7 +35,8 @@ struct RenderParams {
   vec4 intensity;            // rgb: radiant intensity; w: pixel weight = exposure_s / samples
   vec4 intrinsics;           // fx, fy, cx, cy of the output camera (pixels)
   vec4 intrinsics_extra;     // x: skew s; y: orthographic pixel size (m); z: samples per pixel
-                             // side of the rasterised pass (1, or N when supersampled); w: unused
+                             // side of the rasterised pass (1, or N when supersampled); w: side
+                             // of the square the resolve's N x N samples cover, px (1 = pixel)
   vec4 distortion;           // k1, k2, p1, p2
   vec4 distortion_extra;     // x: k3; yzw: unused
   vec4 vis_intrinsics;       // fx, fy, cx, cy of the visibility image (distortion resolve)

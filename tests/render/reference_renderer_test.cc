@@ -242,6 +242,58 @@ TEST(ReferenceRenderer, SupersamplingAveragesAConstantRegionToItsValue) {
   EXPECT_FALSE(RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, options).ok());
 }
 
+// A wide pixel footprint spreads the N x N samples over a square wider than the pixel: pixel
+// (x, y) is then the mean of the point samples at (x + o_i, y + o_j), o = SampleOffset(·, N, W) —
+// here the mean of N² one-ray renders by cameras whose principal point is moved by -o (the ray of
+// pixel x there is the ray of x + o here). At the sphere's silhouette and terminator the
+// footprint's width shows: with the footprint ignored the offsets are (-1/3, 0, 1/3), not
+// (-1/2, 0, 1/2), and those pixels differ by far more than float rounding.
+TEST(ReferenceRenderer, PixelFootprintSpreadsTheSamplesOverItsSquare) {
+  LambertScene s =
+      MakeLambertScene(testing::MakeUvSphere(0.5f, 180, 90), Vec3f(0.8f, 0.6f, 0.4f), 128);
+  const Camera cam = LookAtCamera({3, 0.5, 1}, {0, 0, 0}, 48, 48, 80);
+  Light light;
+  light.position = {1.5, -2.0, 2.5};
+  light.intensity = {5, 5, 5};
+  RenderOptions wide;
+  wide.supersampling = 3;
+  wide.pixel_footprint = 1.5;
+  ASSERT_TRUE(wide.Validate().ok());
+  auto r = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, wide);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  Image mean(cam.width, cam.height, 3, 0.0f);
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < 3; ++i) {
+      Camera moved = cam;
+      moved.K(0, 2) -= SampleOffset(i, 3, 1.5);
+      moved.K(1, 2) -= SampleOffset(j, 3, 1.5);
+      auto point = RenderImage(s.shaded(), moved, light, Rigid3(), 1.0, RenderOptions{});
+      ASSERT_TRUE(point.ok());
+      for (size_t k = 0; k < mean.data.size(); ++k) mean.data[k] += point->pixels.data[k] / 9;
+    }
+  }
+  // Float sums in another order: a few ulps of the brightest pixel.
+  constexpr double kSumOrderTolerance = 1e-5;
+  double peak = 0, worst = 0;
+  int edge_pixels = 0;  // pixels whose point samples differ (silhouette, terminator)
+  for (size_t k = 0; k < mean.data.size(); ++k) peak = std::max(peak, double(mean.data[k]));
+  ASSERT_GT(peak, 0);
+  RenderOptions centre;
+  centre.supersampling = 3;  // the pixel's own square: what an ignored footprint would draw
+  auto narrow = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, centre);
+  ASSERT_TRUE(narrow.ok());
+  for (size_t k = 0; k < mean.data.size(); ++k) {
+    worst = std::max(worst, std::abs(double(r->pixels.data[k]) - mean.data[k]));
+    edge_pixels += std::abs(double(narrow->pixels.data[k]) - mean.data[k]) > 0.01 * peak;
+  }
+  EXPECT_LT(worst, kSumOrderTolerance * peak);
+  EXPECT_GT(edge_pixels, 50) << "the footprint's width must show at edges";
+  wide.pixel_footprint = 0.5;
+  EXPECT_FALSE(wide.Validate().ok());
+  wide.pixel_footprint = kMaxPixelFootprint + 1;
+  EXPECT_FALSE(RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, wide).ok());
+}
+
 TEST(ReferenceRenderer, TurntablePoseMovesTheObject) {
   // A plane offset to +x, turned by 180° about z, must appear at -x.
   TriangleMesh plane = testing::MakeGridPlane(0.5f, 0.5f, 1, 1);

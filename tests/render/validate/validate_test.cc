@@ -603,9 +603,17 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
     }
     return sum;
   };
-  for (const int photo_supersampling : {1, 3}) {
-    SCOPED_TRACE(photo_supersampling);
-    const fs::path cap_dir = dir / ("capture" + std::to_string(photo_supersampling));
+  struct Photographs {
+    int supersampling;
+    double footprint;
+  };
+  for (const Photographs photos : {Photographs{1, 1.0}, Photographs{3, 1.0}, Photographs{4, 1.5}}) {
+    const int photo_supersampling = photos.supersampling;
+    SCOPED_TRACE(::testing::Message() << photo_supersampling << " x " << photo_supersampling
+                                    << " rays over " << photos.footprint << " px");
+    const fs::path cap_dir =
+        dir / ("capture" + std::to_string(photo_supersampling) + "_" +
+               std::to_string(int(photos.footprint * 100)));
     synth::SynthOptions o;
     o.noise = 0.01;
     o.texels = 4000;
@@ -614,6 +622,7 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
     o.lights = 2;
     o.steps = 4;
     o.supersampling = photo_supersampling;
+    o.pixel_footprint = photos.footprint;
     ASSERT_TRUE(synth::WriteSyntheticCapture(o, cap_dir).ok());
     auto capture = ReadCapture(cap_dir);
     ASSERT_TRUE(capture.ok());
@@ -636,11 +645,23 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
     EXPECT_EQ(report["pixel_model"]["mode"], "auto");
     const int chosen = photo_supersampling > 1 ? render::kAutoBoxSupersampling : 1;
     EXPECT_EQ(report["supersampling"], chosen);
+    // The footprint follows the photographs' (a candidate; 1 for point samples, which never
+    // reach the footprint's evidence).
+    std::printf("  footprint evidence: %s\n", report["pixel_model"]["footprint"].dump().c_str());
+    EXPECT_EQ(report["pixel_model"]["footprint"]["footprint_px"].get<double>(), photos.footprint);
     const double error_auto = holdout_error(*capture, cap_dir / "auto");
     const double error_point = holdout_error(*capture, cap_dir / "point");
     std::printf("  holdout squared error: auto %.4g, point %.4g\n", error_auto, error_point);
     if (photo_supersampling == 1) {
       EXPECT_EQ(error_auto, error_point) << "auto must render point-sampled photographs as before";
+    } else if (photos.footprint != 1) {
+      // The photographs' own footprint against the pixel's square, both 4 x 4 rays.
+      render::CaptureRenderOptions own_square = automatic;
+      own_square.pixel_footprint = 1;
+      ASSERT_TRUE(render::RenderCapture(*capture, gt, cap_dir / "square", own_square).ok());
+      const double error_square = holdout_error(*capture, cap_dir / "square");
+      std::printf("  holdout squared error at 1 px: %.4g\n", error_square);
+      EXPECT_LT(error_auto, 0.5 * error_square);
     } else {
       // The truth rendered as the photographs were taken is off by their noise alone; at the
       // pixel centre it misses every edge's partial coverage.
@@ -649,6 +670,12 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
   }
   EXPECT_EQ(render::ParseSupersampling("auto", "--supersample").value(), render::kAutoSupersampling);
   EXPECT_EQ(render::ParseSupersampling("3", "--supersample").value(), 3);
+  EXPECT_EQ(render::ParsePixelFootprint("auto", "--pixel-footprint").value(),
+            render::kAutoPixelFootprint);
+  EXPECT_EQ(render::ParsePixelFootprint("1.5", "--pixel-footprint").value(), 1.5);
+  for (const char* bad : {"0.9", "5", "nan", "1.5px", ""}) {
+    EXPECT_FALSE(render::ParsePixelFootprint(bad, "--pixel-footprint").ok()) << bad;
+  }
   for (const char* bad : {"0", "17", "-1", "2x", "", "many"}) {
     EXPECT_FALSE(render::ParseSupersampling(bad, "--supersample").ok()) << bad;
   }

@@ -424,13 +424,21 @@ TEST_F(VulkanRendererScenes, ComputeShadowMapsRefuseWhatTheDeviceCannotDraw) {
   }
 }
 
-TEST_F(VulkanRendererScenes, SupersamplingMatchesCpu) {
-  Scene s = MakeOccluderScene();
-  ASSERT_TRUE(renderer().SetScene(s.shaded()).ok());
-  Camera cam = LookAtCamera({0.1, -1.2, 2.2}, {0, 0, 0}, 64, 64, 48);
+// The view of MakeOccluderScene that the supersampling tests share: the occluder's shadow and
+// silhouette edges fill a 64 px image.
+Camera OccluderSceneCamera() { return LookAtCamera({0.1, -1.2, 2.2}, {0, 0, 0}, 64, 64, 48); }
+Light OccluderSceneLight() {
   Light light;
   light.position = {1.5, -2.0, 4.0};
   light.intensity = {2, 2, 2};
+  return light;
+}
+
+TEST_F(VulkanRendererScenes, SupersamplingMatchesCpu) {
+  Scene s = MakeOccluderScene();
+  ASSERT_TRUE(renderer().SetScene(s.shaded()).ok());
+  Camera cam = OccluderSceneCamera();
+  const Light light = OccluderSceneLight();
   for (bool distorted : {false, true}) {
     SCOPED_TRACE(distorted ? "distorted" : "pinhole");
     if (distorted) cam.dist = {-0.08, 0.02, 0.0005, -0.0005, 0};
@@ -452,6 +460,55 @@ TEST_F(VulkanRendererScenes, SupersamplingMatchesCpu) {
       EXPECT_EQ(a.mask_mismatches, 0u) << n;
     }
   }
+}
+
+// A footprint wider than the pixel (RenderOptions::pixel_footprint): the samples leave the
+// supersampled pass's grid, so the resolve takes them by their exact rays on every device (the
+// per-fragment default of lavapipe included) and matches the CPU's, pinhole and distorted. The
+// footprint shows: the same render with the pixel's own square differs at the occluder's edges.
+// Orthographic cameras (rasterised on the pixel grid) and forced per-fragment shading refuse it.
+TEST_F(VulkanRendererScenes, PixelFootprintMatchesCpu) {
+  Scene s = MakeOccluderScene();
+  ASSERT_TRUE(renderer().SetScene(s.shaded()).ok());
+  Camera cam = OccluderSceneCamera();
+  const Light light = OccluderSceneLight();
+  RenderOptions wide = WithAux(4);
+  wide.pixel_footprint = 1.5;
+  for (bool distorted : {false, true}) {
+    SCOPED_TRACE(distorted ? "distorted" : "pinhole");
+    if (distorted) cam.dist = {-0.08, 0.02, 0.0005, -0.0005, 0};
+    auto cpu = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, wide);
+    auto gpu = renderer().RenderImage(cam, light, Rigid3(), 1.0, wide);
+    ASSERT_TRUE(cpu.ok() && gpu.ok()) << gpu.status().ToString();
+    EXPECT_TRUE(renderer().last_stats().distortion_resolve);
+    const Agreement a = Compare(*cpu, *gpu);
+    std::printf("[ vulkan   ] footprint 1.5 px, 4x4%s: %s\n", distorted ? " (distorted)" : "",
+                a.ToString().c_str());
+    if (a.psnr_db < kMinPsnrDb) {
+      testing::PrintWorstPixels(*cpu, *gpu, a, 8);
+      testing::DumpRenders(std::string("footprint") + (distorted ? "_distorted" : ""), *cpu, *gpu);
+    }
+    EXPECT_GE(a.psnr_db, kMinPsnrDb);
+    EXPECT_EQ(a.mask_mismatches, 0u);
+    auto own_square = RenderImage(s.shaded(), cam, light, Rigid3(), 1.0, WithAux(4));
+    ASSERT_TRUE(own_square.ok());
+    const Agreement narrow = Compare(*own_square, *gpu);
+    std::printf("[ vulkan   ]   against the CPU's 1 px footprint: %s\n", narrow.ToString().c_str());
+    EXPECT_LT(narrow.psnr_db, kMinPsnrDb) << "the footprint must change the render";
+  }
+  Camera ortho = LookAtCamera({0.4, -1.0, 2.0}, {0, 0, 0}, 80, 64, 1);
+  ortho.model = CameraModel::kOrthographic;
+  ortho.pixel_size_m = 0.03;
+  EXPECT_EQ(renderer().RenderImage(ortho, light, Rigid3(), 1.0, wide).status().code(),
+            StatusCode::kInvalidArgument);
+  VulkanRenderOptions vo;
+  vo.camera_shading = CameraShading::kFragment;
+  const char* device = std::getenv("REFLCAP_TEST_VK_DEVICE");
+  auto fragment = VulkanRenderer::Create(device ? device : "", vo);
+  ASSERT_TRUE(fragment.ok()) << fragment.status().ToString();
+  ASSERT_TRUE((*fragment)->SetScene(s.shaded()).ok());
+  EXPECT_EQ((*fragment)->RenderImage(cam, light, Rigid3(), 1.0, wide).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST_F(VulkanRendererScenes, OrthographicCameraMatchesCpu) {
