@@ -258,6 +258,10 @@ Status SynthOptions::Validate() const {
   if (cameras < 0 || cameras > 64) return InvalidArgumentError("--cameras: must be in [1, 64]");
   if (lights < 0 || lights > 256) return InvalidArgumentError("--lights: must be in [1, 256]");
   if (steps < 0 || steps > 360) return InvalidArgumentError("--steps: must be in [1, 360]");
+  if (!(pixel_footprint >= 1 && pixel_footprint <= render::kMaxPixelFootprint)) {
+    return InvalidArgumentError("--pixel-footprint: must be in [1, ", render::kMaxPixelFootprint,
+                                "]");
+  }
   render::RenderOptions render_options;
   render_options.supersampling = supersampling;
   render_options.pixel_footprint = pixel_footprint;

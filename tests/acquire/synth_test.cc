@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <map>
 
 #include <nlohmann/json.hpp>
@@ -143,6 +144,13 @@ TEST(Synth, RejectsBadOptions) {
   o = SynthOptions();
   o.supersampling = 99;
   EXPECT_FALSE(o.Validate().ok());
+  for (const double footprint : {0.5, 4.5, std::nan("")}) {
+    o = SynthOptions();
+    o.pixel_footprint = footprint;
+    const Status bad_footprint = o.Validate();
+    EXPECT_NE(bad_footprint.message().find("--pixel-footprint"), std::string::npos)
+        << footprint << ": " << bad_footprint.message();
+  }
   o = SynthOptions();
   o.materials = {"glossy", "velvet"};
   const Status bad_material = o.Validate();
