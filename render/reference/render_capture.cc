@@ -84,6 +84,12 @@ StatusOr<int> ParseSupersampling(const std::string& text, const std::string& opt
   return int(n);
 }
 
+int AutoBoxSupersampling(double pixel_footprint) {
+  // 1e-9: a footprint such as 1.25 x 4 = 5 exactly must not round up to 6.
+  const double n = std::ceil(kAutoBoxSupersampling * pixel_footprint - 1e-9);
+  return int(std::clamp(n, double(kAutoBoxSupersampling), double(kMaxSupersampling)));
+}
+
 StatusOr<double> ParsePixelFootprint(const std::string& text, const std::string& option) {
   if (text == "auto") return kAutoPixelFootprint;
   char* end = nullptr;
@@ -893,6 +899,10 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
     footprint_report["why"] = render_options.supersampling > 1
                                   ? "the pixel model is fixed (--supersample N): the pixel itself"
                                   : "one ray per pixel: no footprint to spread over";
+  }
+  if (options.supersampling == kAutoSupersampling && render_options.supersampling > 1 &&
+      render_options.pixel_footprint > 1) {
+    render_options.supersampling = AutoBoxSupersampling(render_options.pixel_footprint);
   }
   footprint_report["footprint_px"] = render_options.pixel_footprint;
   pixel_report["footprint"] = footprint_report;

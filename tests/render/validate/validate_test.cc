@@ -643,7 +643,10 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
     ASSERT_TRUE(render::RenderCapture(*capture, gt, cap_dir / "point", point).ok());
     const Json report = Json::parse(ReadTextFile(cap_dir / "auto/render_report.json").value());
     EXPECT_EQ(report["pixel_model"]["mode"], "auto");
-    const int chosen = photo_supersampling > 1 ? render::kAutoBoxSupersampling : 1;
+    // A box keeps 4 rays per pixel width over its footprint: 6 x 6 over 1.5 px.
+    const int chosen =
+        photo_supersampling > 1 ? render::AutoBoxSupersampling(photos.footprint) : 1;
+    EXPECT_EQ(chosen, photos.footprint > 1 ? 6 : photo_supersampling > 1 ? 4 : 1);
     EXPECT_EQ(report["supersampling"], chosen);
     // The footprint follows the photographs' (a candidate; 1 for point samples, which never
     // reach the footprint's evidence).
@@ -673,6 +676,9 @@ TEST(RenderCapture, PixelModelFollowsThePhotographs) {
   EXPECT_EQ(render::ParsePixelFootprint("auto", "--pixel-footprint").value(),
             render::kAutoPixelFootprint);
   EXPECT_EQ(render::ParsePixelFootprint("1.5", "--pixel-footprint").value(), 1.5);
+  EXPECT_EQ(render::AutoBoxSupersampling(1.0), render::kAutoBoxSupersampling);
+  EXPECT_EQ(render::AutoBoxSupersampling(1.25), 5);
+  EXPECT_EQ(render::AutoBoxSupersampling(render::kMaxPixelFootprint), render::kMaxSupersampling);
   for (const char* bad : {"0.9", "5", "nan", "1.5px", ""}) {
     EXPECT_FALSE(render::ParsePixelFootprint(bad, "--pixel-footprint").ok()) << bad;
   }
