@@ -189,7 +189,8 @@ void AddTexelRadiance(const RayScene& scene, const TexelAtlas& atlas, const Came
         } else {
           for (int sy = 0; sy < n; ++sy) {
             for (int sx = 0; sx < n; ++sx) {
-              sum += trace(x + SampleOffset(sx, n, footprint), double(y) + SampleOffset(sy, n, footprint));
+              sum += trace(x + SampleOffset(sx, n, footprint),
+                           double(y) + SampleOffset(sy, n, footprint));
             }
           }
         }

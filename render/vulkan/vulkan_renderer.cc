@@ -661,7 +661,7 @@ StatusOr<ImagePlan> VulkanRenderer::Impl::PlanMeshImage(const Camera& camera, co
   // supersampled pass's grid: only the resolve takes them, by their exact rays.
   const bool wide_footprint = n > 1 && options.pixel_footprint != 1;
   if (wide_footprint && !pinhole) {
-    return InvalidArgumentError("camera "", camera.id, "": a pixel footprint of ",
+    return InvalidArgumentError("camera \"", camera.id, "\": a pixel footprint of ",
                                 options.pixel_footprint,
                                 " px needs a pinhole camera on the Vulkan renderer (orthographic "
                                 "cameras are rasterised on the pixel grid)");
