@@ -651,6 +651,25 @@ TEST_F(VulkanBatch, EvidenceRenderedOnTheDeviceDecidesAsTheCpus) {
     EXPECT_EQ(icpu.shows, c.interreflection);
     EXPECT_EQ(igpu.shows, icpu.shows);
     EXPECT_TRUE(agree(igpu.error_reduction, icpu.error_reduction));
+    // The footprint's evidence (with a box): every width rendered by the resolve on the device,
+    // with the interreflection when the photographs hold it. Same choice; without interreflection
+    // (the photographs then differ from every candidate at edges by more than the renderers
+    // do) the same error for every width.
+    if (cpu.box) {
+      const IndirectLight* bounced = c.interreflection ? table.get() : nullptr;
+      const FootprintEvidence fcpu =
+          MeasureFootprintEvidence(**fitted, true, kAutoBoxSupersampling, bounced, 2);
+      const FootprintEvidence fgpu =
+          MeasureFootprintEvidence(**fitted, true, kAutoBoxSupersampling, bounced, 2, on_device);
+      std::printf("%s: footprint cpu %.2f px (reduction %.5f), device %.2f px (%.5f)\n",
+                  name.c_str(), fcpu.footprint, fcpu.reduction, fgpu.footprint, fgpu.reduction);
+      EXPECT_EQ(fgpu.images, fcpu.images);
+      EXPECT_EQ(fgpu.footprint, fcpu.footprint);
+      for (size_t f = 0; f < fcpu.error.size() && !c.interreflection; ++f) {
+        EXPECT_TRUE(agree(fgpu.error[f], fcpu.error[f]))
+            << kPixelFootprintCandidates[f] << " px: " << fgpu.error[f] << " vs " << fcpu.error[f];
+      }
+    }
 
     // Through RenderCapture: a backend that renders the evidence says so, and decides the same.
     CaptureRenderBackend backend = VulkanCaptureRenderBackend(renderer());
