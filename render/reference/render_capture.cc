@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -20,7 +21,7 @@
 #include "engine/image/exr_io.h"
 #include "engine/image/image_io.h"
 #include "engine/image/png_io.h"
-#include "engine/image/srgb.h"
+#include "engine/image/ldr.h"
 #include "engine/mesh/mesh_io.h"
 #include "engine/core/worker_pool.h"
 #include "engine/texel/sample_store.h"
@@ -61,6 +62,8 @@ constexpr int kPixelEvidenceImages = 8;
 // The evidence's box render: 2 x 2 stratified rays already average over the pixel (the
 // difference to the point sample is what is measured; kAutoBoxSupersampling refines the average).
 constexpr int kPixelEvidenceSupersampling = 2;
+// The footprint evidence's white, as PSNR-L's (render/validate/metrics.h kLdrWhitePercentile).
+constexpr double kFootprintWhitePercentile = 0.99;
 
 }  // namespace
 
@@ -386,21 +389,21 @@ FootprintEvidence MeasureFootprintEvidence(const FittedCapture& fitted, bool cas
         lit.insert(lit.end(), p, p + 3);
       }
     }
-    if (lit.empty()) continue;  // a black photograph: no edge to see
-    const size_t k99 = std::min(lit.size() - 1, size_t(0.99 * double(lit.size())));
-    std::nth_element(lit.begin(), lit.begin() + ptrdiff_t(k99), lit.end());
+    const std::optional<float> white = NearestRankPercentile(&lit, kFootprintWhitePercentile);
+    if (!white) continue;  // a black photograph: no edge to see
     // A photograph lit only by values ≤ 0 (noise) scales by 1: nothing to normalise.
-    const float scale = lit[k99] > 0 ? 1.0f / lit[k99] : 1.0f;
-    auto display = [scale](float v) { return LinearToSrgb(std::clamp(v * scale, 0.0f, 1.0f)); };
+    const double inv_white = *white > 0 ? 1.0 / *white : 1.0;
     for (int y = 0; y < camera.height; ++y) {
       for (int x = 0; x < camera.width; ++x) {
         const float* p = photo.pixel(x, y);
         if (!UsablePixel(p, image)) continue;
         ++evidence.pixels;
+        float shown[3];  // the photograph's display values, once for every candidate
+        for (int c = 0; c < 3; ++c) shown[c] = LdrValue(p[c], inv_white);
         for (size_t f = 0; f < renders.size(); ++f) {
           const float* q = renders[f].pixels.pixel(x, y);
           for (int c = 0; c < 3; ++c) {
-            const double d = double(display(p[c])) - display(q[c]);
+            const double d = double(shown[c]) - LdrValue(q[c], inv_white);
             evidence.error[f] += d * d;
           }
         }

@@ -186,26 +186,6 @@ std::optional<double> ErrorSums::PsnrLDb() const {
 
 float SrgbEncode(float x) { return LinearToSrgb(x); }
 
-float LdrValue(double x, double inv_white) {
-  const double y = x * inv_white;
-  if (!(y > 0)) return 0;  // also NaN
-  if (!(y < 1)) return 1;
-  return SrgbEncode(float(y));
-}
-
-std::optional<float> NearestRankPercentile(std::vector<float>* values, double fraction) {
-  if (values->empty()) return std::nullopt;
-  const size_t m = values->size();
-  // Rank ceil(fraction m) (1-based), in [1, m]. The factor (1 - 1e-12) keeps a product that is an
-  // integer in exact arithmetic (0.99 · 100) but rounds up by an ulp from taking the next rank;
-  // otherwise 0.99 m is at least 0.01 from an integer, far more than the shift (1e-12 m).
-  const double product = fraction * double(m) * (1 - 1e-12);
-  const size_t rank = std::clamp<size_t>(size_t(std::ceil(product)), 1, m);
-  auto nth = values->begin() + std::ptrdiff_t(rank - 1);
-  std::nth_element(values->begin(), nth, values->end());
-  return *nth;
-}
-
 std::array<std::optional<double>, kWorstShareCount> WorstErrorShares(std::vector<float>* errors) {
   std::array<std::optional<double>, kWorstShareCount> shares;
   const size_t n = errors->size();

@@ -59,6 +59,7 @@
 #include <vector>
 
 #include "engine/image/image.h"
+#include "engine/image/ldr.h"
 
 namespace reflcap::validate {
 
@@ -140,10 +141,10 @@ struct ErrorSums {
 // any real score), and powf costs half of pow (PSNR-L encodes 9 values per pixel).
 float SrgbEncode(float x);
 // L(x) of PSNR-L: SrgbEncode(clip(x inv_white, 0, 1)); NaN maps to 0 (as ToneMap does).
-float LdrValue(double x, double inv_white);
-// The nearest-rank percentile (the ceil(fraction M)-th smallest of the M values, fraction in
-// (0, 1]), found with nth_element (reorders *values); nullopt when *values is empty.
-std::optional<float> NearestRankPercentile(std::vector<float>* values, double fraction);
+// engine/image/ldr.h, shared with the render's pixel-footprint evidence.
+using ::reflcap::LdrValue;
+// The nearest-rank percentile of *values (engine/image/ldr.h).
+using ::reflcap::NearestRankPercentile;
 // Shares of Σ errors carried by the ceil(kWorstPerMille[k] / 1000 · n) largest of the n errors
 // (nth_element; reorders *errors). nullopt when n = 0 or Σ errors is 0 or not finite.
 std::array<std::optional<double>, kWorstShareCount> WorstErrorShares(std::vector<float>* errors);
