@@ -284,6 +284,75 @@ void BM_PrepareTexel(benchmark::State& state) {
 }
 BENCHMARK(BM_PrepareTexel)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The host's post-processing of solved problems alone (problem.h FinishProblem: rank test,
+// standard deviations, natural units, status folding) on one thread, the 187,500 problems of
+// BM_PrepareTexel's texels solved once beforehand by the scalar float LM: what every backend
+// does after its LM (BM_FitTexelsVulkan's finish_s on a GPU, with the channel retries).
+void BM_FinishProblem(benchmark::State& state) {
+  const Data& d = GetData(kStreamChunkTexels, 64);
+  const FitOptions options;
+  const ProblemLayout layout{options.lobe_model, options.lobes};
+  const int per_texel = ProblemsPerTexel(layout.model);
+  ProblemArena arena;  // one arena for every texel: the problems' residual views stay valid
+  uint64_t max_samples = 1;
+  for (uint32_t t = 0; t < d.chunk.texel_count; ++t) {
+    max_samples = std::max<uint64_t>(max_samples, d.chunk.SampleCount(t));
+  }
+  arena.Reserve(3 * d.chunk.samples.size(), max_samples);
+  std::vector<PreparedProblem> problems(size_t(d.chunk.texel_count) * per_texel);
+  size_t cursor = 0;
+  for (uint32_t t = 0; t < d.chunk.texel_count; ++t) {
+    PrepareTexel(options, layout, d.chunk.SamplesOf(t), d.chunk.SampleCount(t), int(t), &arena,
+                 &cursor, &problems[size_t(t) * per_texel]);
+  }
+  // The solutions as a device returns them (parameters, packed normal equations, cost, mask,
+  // status, iterations in floats; the Vulkan fitter's Finish), read into a texel's local
+  // SolvedProblems before FinishProblem, as the backends do: a SolvedProblem per problem kept
+  // in memory (1.3 KB each) would time this machine's memory instead.
+  const int P = layout.NumParams(), packed = PackedIndex(P, 0), stride = P + packed + 4;
+  std::vector<float> results(problems.size() * size_t(stride));
+  const LmSettings settings = MakeLmSettings(options);
+  ParallelFor(0, int64_t(problems.size()), 256, [&](int64_t b, int64_t e, int) {
+    for (int64_t i = b; i < e; ++i) {
+      const SolvedProblem s = SolveScalar<float>(problems[size_t(i)], settings, options.loss);
+      float* w = &results[size_t(i) * stride];
+      for (int j = 0; j < P; ++j) w[j] = float(s.x[j]);
+      for (int k = 0; k < packed; ++k) w[P + k] = float(s.a[k]);
+      w[P + packed] = float(s.cost);
+      w[P + packed + 1] = float(s.free_mask);
+      w[P + packed + 2] = float(int(s.status));
+      w[P + packed + 3] = float(s.iterations);
+    }
+  });
+  std::vector<TexelFit> fits(d.chunk.texel_count);
+  constexpr int kMaxPerTexel = 3;
+  for (auto _ : state) {
+    for (uint32_t t = 0; t < d.chunk.texel_count; ++t) {
+      SolvedProblem solved[kMaxPerTexel];
+      for (int p = 0; p < per_texel; ++p) {
+        const float* w = &results[(size_t(t) * per_texel + p) * stride];
+        solved[p] = SolvedProblem{};
+        for (int j = 0; j < P; ++j) solved[p].x[j] = w[j];
+        for (int k = 0; k < packed; ++k) solved[p].a[k] = w[P + k];
+        solved[p].cost = w[P + packed];
+        solved[p].free_mask = uint32_t(w[P + packed + 1]);
+        solved[p].status = FitStatus(int(w[P + packed + 2]));
+        solved[p].iterations = int(w[P + packed + 3]);
+      }
+      BeginTexel(layout.lobes, &fits[t]);
+      for (int p = 0; p < per_texel; ++p) {
+        FinishProblem(problems[size_t(t) * per_texel + p], solved[p], &fits[t]);
+      }
+    }
+    benchmark::DoNotOptimize(fits.data());
+  }
+  // Seconds a problem (shown with an SI prefix: 290n = 290 ns).
+  state.counters["s_per_problem"] = benchmark::Counter(
+      double(problems.size()) * double(state.iterations()),
+      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_FinishProblem)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // What one ParallelFor call costs beyond its work: 64 chunks of a few nanoseconds each on all
 // hardware threads (the fit makes ~1,200 such calls per million texels, most with real work).
 // The time column is the time per call; checked: every chunk ran once per call.

@@ -160,11 +160,13 @@ float* OutputSlotRef(const ProblemLayout& layout, int problem, int slot, brdf::B
   return lobe_field(p->lobes[s / 4][problem], s % 4);
 }
 
-void ToBrdfParams(const ProblemLayout& layout, const double* x, double scale, int problem,
-                  brdf::BrdfParams* out) {
-  double slots[3 + 12 * brdf::kMaxLobes];
+int ToBrdfParams(const ProblemLayout& layout, const double* x, double scale, int problem,
+                 brdf::BrdfParams* out, double* slots) {
+  double own[3 + 12 * brdf::kMaxLobes];
+  if (slots == nullptr) slots = own;
   const int n = OutputSlots(layout, x, scale, slots);
   for (int i = 0; i < n; ++i) *OutputSlotRef(layout, problem, i, out) = ToFiniteFloat(slots[i]);
+  return n;
 }
 
 void FromBrdfParams(const ProblemLayout& layout, const brdf::BrdfParams& params, double scale,

@@ -271,8 +271,9 @@ inline T EvalModelDyn(const ProblemLayout& layout, const T* x, const T& xx, cons
 // Writes the natural-unit BRDF parameters of problem `problem` (a channel for aniso/iso, ignored
 // for shared) into *out (num_lobes must already equal layout.lobes). `scale` is the problem's
 // normalisation S. Non-finite results are impossible for in-bound x; they are still mapped to 0.
-void ToBrdfParams(const ProblemLayout& layout, const double* x, double scale, int problem,
-                  brdf::BrdfParams* out);
+// Returns the number of output slots; with `slots` given, also their values (OutputSlots).
+int ToBrdfParams(const ProblemLayout& layout, const double* x, double scale, int problem,
+                 brdf::BrdfParams* out, double* slots = nullptr);
 // The natural-unit output slots of one problem in BrdfMaps channel order restricted to the
 // problem (aniso/iso: rho, then per lobe Cx Cy Cz n of its channel; shared: all channels) —
 // used to propagate covariances. Returns the number of slots written to `out` (<= 39).

@@ -366,27 +366,33 @@ void BeginTexel(int lobes, TexelFit* fit) {
 
 namespace {
 
-// Inverse of the free block of the packed symmetric matrix a (size n, mask free) through its
-// unit-diagonal Cholesky factorisation; false when a pivot of the unit-diagonal form is below
-// kLmSingularPivot (rank deficient). inv is dense n x n (row-major), zero outside the block.
-bool InvertFreeBlock(int n, uint32_t free, const double* a, double* inv) {
-  int idx[kMaxParams];
+// The free block of the packed symmetric matrix a (size n, mask free), scaled to unit diagonal
+// (D A D with D = diag(1 / sqrt(a_jj))) and factorised as L L^T.
+struct FreeBlockFactor {
+  int m = 0;                   // free parameters
+  int idx[kMaxParams] = {};    // their indices
+  double scale[kMaxParams];    // D
+  double l[kMaxPacked];        // L, packed lower triangle
+};
+
+// False when a pivot of the unit-diagonal form is below kLmSingularPivot (rank deficient).
+bool FactorFreeBlock(int n, uint32_t free, const double* a, FreeBlockFactor* f) {
   int m = 0;
   for (int j = 0; j < n; ++j) {
-    if ((free >> j) & 1u) idx[m++] = j;
+    if ((free >> j) & 1u) f->idx[m++] = j;
   }
-  double scale[kMaxParams];
+  f->m = m;
   for (int i = 0; i < m; ++i) {
-    const double d = a[PackedIndex(idx[i], idx[i])];
+    const double d = a[PackedIndex(f->idx[i], f->idx[i])];
     // A parameter without any influence on the residuals: nothing determines it.
     if (!(d > 1e-300)) return false;
-    scale[i] = 1.0 / std::sqrt(d);
+    f->scale[i] = 1.0 / std::sqrt(d);
   }
-  double l[kMaxPacked];
+  double* l = f->l;
   for (int i = 0; i < m; ++i) {
     for (int j = 0; j <= i; ++j) {
-      const int p = std::max(idx[i], idx[j]), q = std::min(idx[i], idx[j]);
-      l[PackedIndex(i, j)] = a[PackedIndex(p, q)] * scale[i] * scale[j];
+      const int p = std::max(f->idx[i], f->idx[j]), q = std::min(f->idx[i], f->idx[j]);
+      l[PackedIndex(i, j)] = a[PackedIndex(p, q)] * f->scale[i] * f->scale[j];
     }
   }
   for (int j = 0; j < m; ++j) {
@@ -401,23 +407,22 @@ bool InvertFreeBlock(int n, uint32_t free, const double* a, double* inv) {
       l[PackedIndex(i, j)] = s / r;
     }
   }
-  for (int i = 0; i < n * n; ++i) inv[i] = 0;
-  for (int col = 0; col < m; ++col) {
-    double b[kMaxParams];
-    for (int i = 0; i < m; ++i) b[i] = i == col ? 1.0 : 0.0;
-    for (int i = 0; i < m; ++i) {
-      double s = b[i];
-      for (int k = 0; k < i; ++k) s -= l[PackedIndex(i, k)] * b[k];
-      b[i] = s / l[PackedIndex(i, i)];
-    }
-    for (int i = m - 1; i >= 0; --i) {
-      double s = b[i];
-      for (int k = i + 1; k < m; ++k) s -= l[PackedIndex(k, i)] * b[k];
-      b[i] = s / l[PackedIndex(i, i)];
-    }
-    for (int i = 0; i < m; ++i) inv[idx[i] * n + idx[col]] = b[i] * scale[i] * scale[col];
-  }
   return true;
+}
+
+// g^T A_ff^-1 g for the free block A_ff of a factorised as above, g indexed by parameter
+// (entries of fixed parameters ignored): A_ff^-1 = D (L L^T)^-1 D, so the form is |L^-1 D g|^2,
+// one forward substitution (no explicit inverse: a fifth of the divisions).
+double InverseQuadraticForm(const FreeBlockFactor& f, const double* g) {
+  double z[kMaxParams];
+  double v = 0;
+  for (int i = 0; i < f.m; ++i) {
+    double s = f.scale[i] * g[f.idx[i]];
+    for (int k = 0; k < i; ++k) s -= f.l[PackedIndex(i, k)] * z[k];
+    z[i] = s / f.l[PackedIndex(i, i)];
+    v += z[i] * z[i];
+  }
+  return v;
 }
 
 }  // namespace
@@ -547,10 +552,10 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
   const int residuals = q.residuals.count();
   FitStatus status = q.preset != FitStatus::kConverged ? q.preset : solved_in.status;
 
-  double inv[kMaxParams * kMaxParams];
+  FreeBlockFactor factor;
   int free_count = 0;
   for (int j = 0; j < n; ++j) free_count += (solved_in.free_mask >> j) & 1u;
-  bool invertible = free_count > 0 && InvertFreeBlock(n, solved_in.free_mask, solved_in.a, inv);
+  bool invertible = free_count > 0 && FactorFreeBlock(n, solved_in.free_mask, solved_in.a, &factor);
   if (!invertible && free_count > 0 && residuals > 0 &&
       (status == FitStatus::kConverged || status == FitStatus::kMaxIterations)) {
     status = FitStatus::kSingular;
@@ -559,27 +564,36 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
   // A lobe the data cannot pin down — the LM ended singular, or the lobe rises far above every
   // sample somewhere on the hemisphere (extrapolation, not measurement) — is replaced by the
   // problem's Lambert-only fit, and the status says why (kSingular, kUnidentifiableLobe).
-  SolvedProblem solved = solved_in;
+  // The solution as it is kept: parameters and cost (LambertFallback may replace both), not a
+  // copy of the whole SolvedProblem (its normal equations are only read, from solved_in).
+  double x[kMaxParams];
+  for (int j = 0; j < kMaxParams; ++j) x[j] = solved_in.x[j];
+  double cost = solved_in.cost;
+  const uint32_t free_mask = solved_in.free_mask;
   bool fell_back = false;
   if (layout.lobes > 0 && !q.lambert_only && residuals > 0 &&
-      (status == FitStatus::kSingular || LobeExceedsEvidence(layout, solved.x))) {
+      (status == FitStatus::kSingular || LobeExceedsEvidence(layout, x))) {
     if (status != FitStatus::kSingular) status = FitStatus::kUnidentifiableLobe;
-    solved.cost = LambertFallback(q, solved.x);
+    cost = LambertFallback(q, x);
     fell_back = true;
     invertible = false;  // sigma unknown: the normal equations belong to the discarded lobe fit
   }
   if (q.nonfinite_input) status = FitStatus::kNonFiniteInput;
 
   // Parameters in natural units.
-  ToBrdfParams(layout, solved.x, q.scale, q.problem, &fit->params);
+  double slots[3 + 12 * brdf::kMaxLobes];
+  const int num_slots = ToBrdfParams(layout, x, q.scale, q.problem, &fit->params, slots);
 
   // Standard deviations: Cov = s^2 (J^T J)^-1 on the free block, s^2 = 2 cost / (m - p),
   // pushed through the map to natural units by a forward-difference Jacobian.
   if (invertible && residuals > free_count) {
-    const double variance = 2.0 * solved.cost / double(residuals - free_count);
-    double slots[3 + 12 * brdf::kMaxLobes];
-    const int num_slots = OutputSlots(layout, solved.x, q.scale, slots);
-    double g[kMaxParams][3 + 12 * brdf::kMaxLobes] = {};
+    const double variance = 2.0 * cost / double(residuals - free_count);
+    // g[i][j]: d slot i / d parameter j. Only the num_slots x n block is used, and only it is
+    // zeroed (the whole array is 5 KB).
+    double g[3 + 12 * brdf::kMaxLobes][kMaxParams];
+    for (int i = 0; i < num_slots; ++i) {
+      for (int j = 0; j < n; ++j) g[i][j] = 0;
+    }
     bool depends_on_fixed[3 + 12 * brdf::kMaxLobes] = {};
     if (layout.model != LobeModel::kShared) {
       // Analytic: rho = S rho'; C = C' r with r = S^(1/n), dC/dn = -C' r log(S) / n^2.
@@ -587,47 +601,40 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
       g[0][0] = q.scale;
       for (int k = 0; k < layout.lobes; ++k) {
         const int o = LobeOffset(layout.model, k), e = ExponentIndex(layout.model, k);
-        const double nexp = solved.x[e];
+        const double nexp = x[e];
         const double r = std::pow(q.scale, 1.0 / nexp);
         const double dr_dn = -r * std::log(q.scale) / (nexp * nexp);
         const int slot = 1 + 4 * k;
         for (int f = 0; f < 3; ++f) {
           const int param = iso ? o + (f < 2 ? 0 : 1) : o + f;
-          g[param][slot + f] = r;
-          g[e][slot + f] = solved.x[param] * dr_dn;
+          g[slot + f][param] = r;
+          g[slot + f][e] = x[param] * dr_dn;
         }
-        g[e][slot + 3] = 1;
+        g[slot + 3][e] = 1;
       }
       for (int j = 0; j < n; ++j) {
-        if ((solved.free_mask >> j) & 1u) continue;
-        for (int i = 0; i < num_slots; ++i) depends_on_fixed[i] |= g[j][i] != 0;
+        if ((free_mask >> j) & 1u) continue;
+        for (int i = 0; i < num_slots; ++i) depends_on_fixed[i] |= g[i][j] != 0;
       }
     } else {
       for (int j = 0; j < n; ++j) {
         double xp[kMaxParams];
-        for (int i = 0; i < n; ++i) xp[i] = solved.x[i];
+        for (int i = 0; i < n; ++i) xp[i] = x[i];
         // Step 1e-7 relative: forward-difference error ~1e-7, rounding error ~1e-9 in double.
-        double h = 1e-7 * std::max(1.0, std::abs(solved.x[j]));
+        double h = 1e-7 * std::max(1.0, std::abs(x[j]));
         if (xp[j] + h > q.upper[j]) h = -h;
         xp[j] += h;
         double moved[3 + 12 * brdf::kMaxLobes];
         OutputSlots(layout, xp, q.scale, moved);
-        const bool is_free = (solved.free_mask >> j) & 1u;
+        const bool is_free = (free_mask >> j) & 1u;
         for (int i = 0; i < num_slots; ++i) {
-          g[j][i] = (moved[i] - slots[i]) / h;
-          if (!is_free && g[j][i] != 0) depends_on_fixed[i] = true;
+          g[i][j] = (moved[i] - slots[i]) / h;
+          if (!is_free && g[i][j] != 0) depends_on_fixed[i] = true;
         }
       }
     }
     for (int i = 0; i < num_slots; ++i) {
-      double v = 0;
-      for (int a = 0; a < n; ++a) {
-        if (!((solved.free_mask >> a) & 1u)) continue;
-        for (int b = 0; b < n; ++b) {
-          if (!((solved.free_mask >> b) & 1u)) continue;
-          v += g[a][i] * inv[a * n + b] * g[b][i];
-        }
-      }
+      const double v = InverseQuadraticForm(factor, g[i]);
       const double sigma = std::sqrt(std::max(0.0, variance * v));
       const bool known = !depends_on_fixed[i] && std::isfinite(sigma) && sigma < 3.0e38;
       *OutputSlotRef(layout, q.problem, i, &fit->sigma) = known ? float(sigma) : -1.0f;
@@ -635,9 +642,9 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
   }
 
   fit->status = CombineStatus(fit->status, status);
-  const double cost = solved.cost * q.weight_scale * q.scale * q.scale;
-  fit->cost += std::isfinite(cost) ? float(std::min(cost, 3.0e38)) : 0.0f;
-  fit->iterations = std::max(fit->iterations, solved.iterations);
+  const double natural_cost = cost * q.weight_scale * q.scale * q.scale;
+  fit->cost += std::isfinite(natural_cost) ? float(std::min(natural_cost, 3.0e38)) : 0.0f;
+  fit->iterations = std::max(fit->iterations, solved_in.iterations);
   fit->samples = std::max(fit->samples, q.samples);
   fit->residuals += residuals;
   fit->lambert_only = fit->lambert_only || q.lambert_only || fell_back;

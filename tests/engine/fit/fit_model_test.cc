@@ -4,11 +4,13 @@
 
 #include <ceres/jet.h>
 
+#include <Eigen/Dense>
 #include <random>
 
 #include "engine/fit/fitter.h"
 #include "engine/fit/lm.h"
 #include "engine/fit/model.h"
+#include "engine/fit/problem.h"
 #include "engine/fit/synthetic_samples.h"
 #include "shaders/shared/fit_status.h"
 
@@ -226,6 +228,83 @@ TEST(CholeskySolve, SolvesAndRejectsIndefiniteMatrices) {
   double bad[3] = {1, 2, 1};  // [[1,2],[2,1]]: indefinite
   double rhs[2] = {1, 1};
   EXPECT_FALSE(CholeskySolve(2, bad, rhs));
+}
+
+// FinishProblem's standard deviations are Cov = s^2 (J^T J)^-1 over the free parameters, pushed
+// through the map to natural units: checked against a dense inverse (Eigen) of a random
+// well-conditioned J^T J, with every parameter free and with the exponent held fixed.
+TEST(FinishProblem, StandardDeviationsAreTheFreeBlocksCovariance) {
+  const ProblemLayout layout{LobeModel::kAniso, 1};  // rho, Cx, Cy, Cz, n
+  constexpr int n = 5;
+  constexpr int kResiduals = 40;
+  std::vector<float> zeros(kResiduals, 0.0f);
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  Eigen::Matrix<double, n, n> jtj;
+  {
+    Eigen::Matrix<double, 2 * n, n> j;
+    for (int r = 0; r < 2 * n; ++r) {
+      for (int c = 0; c < n; ++c) j(r, c) = normal(rng) * (1 + c);  // columns of unequal size
+    }
+    jtj = j.transpose() * j;
+  }
+  for (const double scale : {1.0, 3.0}) {
+    for (const uint32_t free_mask : {0x1Fu, 0x0Fu}) {  // all free; n (parameter 4) fixed
+      PreparedProblem q;
+      q.layout = layout;
+      q.scale = scale;
+      q.samples = kResiduals;
+      q.num_stages = 2;
+      q.residuals.xx = q.residuals.yy = q.residuals.zz = q.residuals.y = q.residuals.sw =
+          zeros.data();
+      q.residuals.begin[1] = q.residuals.begin[2] = q.residuals.begin[3] = kResiduals;
+      ParameterBounds(layout, q.lower, q.upper);
+      SolvedProblem solved;
+      const double x[n] = {0.4, -0.5, -0.5, 0.9, 10.0};  // peak 0.9^10: within the evidence
+      for (int j = 0; j < n; ++j) solved.x[j] = x[j];
+      for (int r = 0; r < n; ++r) {
+        for (int c = 0; c <= r; ++c) solved.a[PackedIndex(r, c)] = jtj(r, c);
+      }
+      solved.cost = 7;
+      solved.free_mask = free_mask;
+      TexelFit fit;
+      BeginTexel(1, &fit);
+      FinishProblem(q, solved, &fit);
+      ASSERT_EQ(fit.status, FitStatus::kConverged);
+
+      const int m = free_mask == 0x1Fu ? 5 : 4;  // the free block is the leading m x m one
+      const Eigen::MatrixXd inv = jtj.topLeftCorner(m, m).inverse();
+      const double variance = 2 * solved.cost / (kResiduals - m);
+      // d(natural)/d(normalised): rho = S rho'; C = C' r, r = S^(1/n); dC/dn = -C' r log S / n^2.
+      const double r = std::pow(scale, 1.0 / x[4]);
+      const double dr_dn = -r * std::log(scale) / (x[4] * x[4]);
+      auto expected = [&](int param, double d_param, double d_n) {
+        Eigen::VectorXd g = Eigen::VectorXd::Zero(m);
+        g(param) = d_param;
+        if (m == 5) g(4) += d_n;
+        return std::sqrt(variance * g.dot(inv * g));
+      };
+      // Relative 1e-6: float outputs (1e-7) of a double computation on a well-conditioned matrix.
+      constexpr double kRel = 1e-6;
+      const brdf::LobeParams& s = fit.sigma.lobes[0][0];
+      EXPECT_NEAR(fit.sigma.rho_d[0], expected(0, scale, 0), kRel * expected(0, scale, 0));
+      const float* c_sigma[3] = {&s.cx, &s.cy, &s.cz};
+      for (int f = 0; f < 3; ++f) {
+        const bool depends_on_fixed_n = m == 4 && dr_dn != 0;
+        if (depends_on_fixed_n) {
+          EXPECT_EQ(*c_sigma[f], -1.0f) << "C depends on the fixed exponent when S != 1";
+        } else {
+          const double e = expected(1 + f, r, x[1 + f] * dr_dn);
+          EXPECT_NEAR(*c_sigma[f], e, kRel * e) << "scale " << scale << " mask " << free_mask;
+        }
+      }
+      if (m == 5) {
+        EXPECT_NEAR(s.n, expected(4, 0, 1), kRel * expected(4, 0, 1));
+      } else {
+        EXPECT_EQ(s.n, -1.0f) << "the fixed exponent has no standard deviation";
+      }
+    }
+  }
 }
 
 }  // namespace
