@@ -906,6 +906,11 @@ StatusOr<CaptureRenderSummary> RenderCapture(const Capture& capture, const fs::p
   if (options.supersampling == kAutoSupersampling && render_options.supersampling > 1 &&
       render_options.pixel_footprint > 1) {
     render_options.supersampling = AutoBoxSupersampling(render_options.pixel_footprint);
+    // The line above said the pixel model's N x N; the footprint's own N is what renders.
+    REFLCAP_LOG(kInfo) << "render: " << render_options.supersampling << "x"
+                       << render_options.supersampling << " rays per pixel over the "
+                       << render_options.pixel_footprint
+                       << " px footprint (auto: the 1 px box's density of rays)";
   }
   footprint_report["footprint_px"] = render_options.pixel_footprint;
   pixel_report["footprint"] = footprint_report;
