@@ -62,7 +62,7 @@ constexpr int kPixelEvidenceImages = 8;
 // The evidence's box render: 2 x 2 stratified rays already average over the pixel (the
 // difference to the point sample is what is measured; kAutoBoxSupersampling refines the average).
 constexpr int kPixelEvidenceSupersampling = 2;
-// The footprint evidence's white, as PSNR-L's (render/validate/metrics.h kLdrWhitePercentile).
+// The display-referred evidences' white, as PSNR-L's (render/validate/metrics.h kLdrWhitePercentile).
 constexpr double kFootprintWhitePercentile = 0.99;
 
 }  // namespace
@@ -293,6 +293,23 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   return evidence;
 }
 
+// 1 / the photograph's "white" for display-referred errors (PSNR-L's, engine/image/ldr.h): its
+// 99th percentile over the channels of its lit, usable pixels; nullopt for a black photograph
+// (nothing to see). A photograph lit only by values <= 0 (noise) scales by 1.
+std::optional<double> DisplayInvWhite(const Image& photo, const CaptureImage& image) {
+  std::vector<float> lit;
+  for (int y = 0; y < photo.height; ++y) {
+    for (int x = 0; x < photo.width; ++x) {
+      const float* p = photo.pixel(x, y);
+      if (!UsablePixel(p, image) || !(p[0] > 0 || p[1] > 0 || p[2] > 0)) continue;
+      lit.insert(lit.end(), p, p + 3);
+    }
+  }
+  const std::optional<float> white = NearestRankPercentile(&lit, kFootprintWhitePercentile);
+  if (!white) return std::nullopt;
+  return *white > 0 ? 1.0 / *white : 1.0;
+}
+
 PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadows,
                                    const EvidenceRender& render) {
   const Capture& capture = *fitted.capture;
@@ -315,6 +332,11 @@ PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadow
       continue;
     }
     const Image& photo = *read;
+    // Display-referred errors, as the footprint's evidence below: in linear values the few
+    // highlight pixels whose level the fit misses outweigh every edge and texture border, where
+    // the pixel model shows (render_capture.h kMinPixelErrorReduction).
+    const std::optional<double> inv_white = DisplayInvWhite(photo, image);
+    if (!inv_white) continue;  // a black photograph: nothing to compare
     for (int y = 0; y < camera.height; ++y) {
       for (int x = 0; x < camera.width; ++x) {
         const float* p = photo.pixel(x, y);
@@ -323,8 +345,11 @@ PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadow
         if (!UsablePixel(p, image)) continue;
         ++evidence.pixels;
         for (int c = 0; c < 3; ++c) {
-          evidence.error_point += (double(p[c]) - a[c]) * (double(p[c]) - a[c]);
-          evidence.error_box += (double(p[c]) - b[c]) * (double(p[c]) - b[c]);
+          const double shown = LdrValue(p[c], *inv_white);
+          const double da = shown - LdrValue(a[c], *inv_white);
+          const double db = shown - LdrValue(b[c], *inv_white);
+          evidence.error_point += da * da;
+          evidence.error_box += db * db;
         }
       }
     }
@@ -381,18 +406,9 @@ FootprintEvidence MeasureFootprintEvidence(const FittedCapture& fitted, bool cas
     // values the few highlight pixels whose level the fit misses outweigh every edge (suzanne's
     // train photographs: 1 px least error in linear values, while 1.5 px predicts its holdout
     // photographs better in every metric but HDR PSNR, which is level with it).
-    std::vector<float> lit;
-    for (int y = 0; y < camera.height; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        const float* p = photo.pixel(x, y);
-        if (!UsablePixel(p, image) || !(p[0] > 0 || p[1] > 0 || p[2] > 0)) continue;
-        lit.insert(lit.end(), p, p + 3);
-      }
-    }
-    const std::optional<float> white = NearestRankPercentile(&lit, kFootprintWhitePercentile);
-    if (!white) continue;  // a black photograph: no edge to see
-    // A photograph lit only by values ≤ 0 (noise) scales by 1: nothing to normalise.
-    const double inv_white = *white > 0 ? 1.0 / *white : 1.0;
+    const std::optional<double> display = DisplayInvWhite(photo, image);
+    if (!display) continue;  // a black photograph: no edge to see
+    const double inv_white = *display;
     for (int y = 0; y < camera.height; ++y) {
       for (int x = 0; x < camera.width; ++x) {
         const float* p = photo.pixel(x, y);
