@@ -177,7 +177,7 @@ void RunFits(benchmark::State& state, const FitterConfig& config, int texels, in
   if (!Verify(*fitter, d, options, state)) return;
   std::vector<TexelFit> results;
   double device_seconds = 0, dispatches = 0, prepare_seconds = 0, finish_seconds = 0,
-         evaluations = 0, prepare_texel_thread_s = 0, prepare_layout_thread_s = 0;
+         evaluations = 0, prepare_texel_thread_s = 0, prepare_layout_thread_s = 0, reprepared = 0;
   const std::clock_t cpu_start = std::clock();
   for (auto _ : state) {
     for (int c = 0; c < chunks; ++c) {
@@ -189,6 +189,7 @@ void RunFits(benchmark::State& state, const FitterConfig& config, int texels, in
         prepare_texel_thread_s += vk->last_stats().prepare_texel_thread_seconds;
         prepare_layout_thread_s += vk->last_stats().prepare_layout_thread_seconds;
         finish_seconds += vk->last_stats().finish_seconds;
+        reprepared += double(vk->last_stats().reprepared_texels);
         evaluations += double(vk->last_stats().residual_evaluations);
       }
     }
@@ -208,6 +209,8 @@ void RunFits(benchmark::State& state, const FitterConfig& config, int texels, in
     state.counters["prepare_texel_ts"] = prepare_texel_thread_s / std::max<double>(1, state.iterations());
     state.counters["prepare_layout_ts"] = prepare_layout_thread_s / std::max<double>(1, state.iterations());
     state.counters["finish_s"] = finish_seconds / std::max<double>(1, state.iterations());
+    // Texels prepared again while finishing (fallbacks, channel retries read their residuals).
+    state.counters["reprepared"] = reprepared / std::max<double>(1, state.iterations());
     // The device's LM work as FLOP/s over the device's batches and over the whole wall time,
     // and as a fraction of the measured multiply-add peak (bench/gpu/device_peak.h).
 #ifdef REFLCAP_HAVE_DEVICE_PEAK

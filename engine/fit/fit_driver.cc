@@ -380,6 +380,7 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       sum.prepare_texel_thread_seconds += st.prepare_texel_thread_seconds;
       sum.prepare_layout_thread_seconds += st.prepare_layout_thread_seconds;
       sum.finish_seconds += st.finish_seconds;
+      sum.reprepared_texels += st.reprepared_texels;
       pass->used_vulkan = true;
     }
     if (select_model) {
@@ -717,7 +718,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
                         {"prepare_s", vulkan_stats.prepare_seconds},
                         {"prepare_texel_thread_s", vulkan_stats.prepare_texel_thread_seconds},
                         {"prepare_layout_thread_s", vulkan_stats.prepare_layout_thread_seconds},
-                        {"finish_s", vulkan_stats.finish_seconds}};
+                        {"finish_s", vulkan_stats.finish_seconds},
+                        {"reprepared_texels", vulkan_stats.reprepared_texels}};
   }
   if (select_model) {
     report["lobe_model_choice"] = {{"aniso", info.texels - iso_chosen}, {"iso", iso_chosen}};

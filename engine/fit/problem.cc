@@ -546,7 +546,7 @@ double LambertFallback(const PreparedProblem& q, double* x) {
   return cost;
 }
 
-void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, TexelFit* fit) {
+bool FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, TexelFit* fit) {
   const ProblemLayout& layout = q.layout;
   const int n = layout.NumParams();
   const int residuals = q.residuals.count();
@@ -573,6 +573,9 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
   bool fell_back = false;
   if (layout.lobes > 0 && !q.lambert_only && residuals > 0 &&
       (status == FitStatus::kSingular || LobeExceedsEvidence(layout, x))) {
+    // The fallback refits rho from the residuals: a view without them (the Vulkan fitter keeps
+    // only their counts) asks for them, before anything was written.
+    if (q.residuals.y == nullptr) return false;
     if (status != FitStatus::kSingular) status = FitStatus::kUnidentifiableLobe;
     cost = LambertFallback(q, x);
     fell_back = true;
@@ -648,6 +651,7 @@ void FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
   fit->samples = std::max(fit->samples, q.samples);
   fit->residuals += residuals;
   fit->lambert_only = fit->lambert_only || q.lambert_only || fell_back;
+  return true;
 }
 
 namespace {

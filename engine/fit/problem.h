@@ -159,7 +159,10 @@ int AdoptChannelRetries(const SolvedProblem* retried, const int* channel, int co
 // Folds one solved problem into its texel's TexelFit (parameters, sigma, status, cost, counts).
 // A problem that ended kSingular, or whose lobe exceeds the evidence (LobeExceedsEvidence), is
 // replaced by its Lambert-only fit (status kSingular, resp. kUnidentifiableLobe; sigma unknown).
-void FinishProblem(const PreparedProblem& problem, const SolvedProblem& solved, TexelFit* fit);
+// That fallback reads the residuals: when it is needed and the view holds only their counts
+// (data pointers null), nothing is written and the result is false — prepare the texel again
+// (PrepareTexel is deterministic) and finish it from there. True otherwise.
+bool FinishProblem(const PreparedProblem& problem, const SolvedProblem& solved, TexelFit* fit);
 
 // Runs one prepared problem through all its stages with the scalar LM in T (float or double).
 template <typename T>

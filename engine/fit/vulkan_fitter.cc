@@ -2,15 +2,12 @@
 // the dispatch loop that runs shaders/fit/lm_fit.comp until every problem's LM has ended.
 //
 // Data layout (shaders/shared/fit_gpu.h has the word layouts):
-//   records  one slot per residual, each problem's residuals contiguous: the store is CSR by
-//            texel and a lane reads its problem's slots in order. Texel t of a batch owns
-//            3 x samples(t) slots (its problems' residuals never exceed that). On the host five
-//            sections (xx, yy, zz, y, sqrt(w)) that back the prepared problems' ResidualViews,
-//            which FinishProblem reads (its Lambert-only fallback refits rho from them), so they
-//            live until the batch is finished. On the device one RGBA32F uniform texel buffer of
-//            residual quads (shared/fit_gpu.h; lm_fit.comp says why): texel t owns
-//            QuadBound(samples(t)) quads of 5 texels, enough for its problems' quads (none
-//            for a texel too large for a batch: its problems are solved on the CPU).
+//   records  the residuals, on the device only: one RGBA32F uniform texel buffer of residual
+//            quads (shared/fit_gpu.h; lm_fit.comp says why): texel t owns QuadBound(samples(t))
+//            quads of 5 texels, enough for its problems' quads (none for a texel too large for
+//            a batch: its problems are solved on the CPU). The host keeps no copy: a prepared
+//            problem's ResidualView keeps its counts, and the few texels whose finishing reads
+//            residuals (a Lambert-only fallback, a channel retry) are prepared again then.
 //   desc     per problem: first record, channel blocks, stages, masks, loss scale, x0.
 //   queue    device problems sorted by residual count, largest first: lanes in lock-step
 //            (lavapipe runs 8 invocations as one SIMD subgroup) then take problems of similar
@@ -199,16 +196,13 @@ double Seconds(std::chrono::steady_clock::time_point since) {
 // One batch of consecutive texels of a chunk, on the host.
 struct Batch {
   uint32_t begin = 0, end = 0;            // chunk texels [begin, end)
-  std::vector<uint64_t> slot;             // first record slot of each texel (batch-local)
   std::vector<uint64_t> quad;             // first device quad of each texel (batch-local)
   std::vector<PreparedProblem> problems;  // (end - begin) x ProblemsPerTexel
   std::vector<SolvedProblem> solved;      // filled for kRouteTrivial / kRouteCpu problems
   std::vector<uint8_t> route;
-  // Not zeroed when they grow (a million-texel batch's records are 3.84 GB, its quads as many:
-  // zeroing them was serial, before Prepare's workers write them in parallel). Only what Prepare
-  // wrote is read: each problem's residuals through its views, and the device reads the quads of
-  // the problems it is given (the other texels' quads, like mapped device memory, hold garbage).
-  UninitializedVector<float> records;     // 5 sections of slot.back() floats (see the top)
+  // Not zeroed when it grows (a million-texel batch's quads are 3.84 GB: zeroing them was serial,
+  // before Prepare's workers write them in parallel). The device reads the quads of the problems
+  // it is given (the other texels' quads, like mapped device memory, hold garbage).
   UninitializedVector<float> rgba;        // the device's quads when device_records is not mapped
   internal::TexelBuffer* device_records = nullptr;  // the batch's device quads
   float* quads = nullptr;                 // where Prepare writes them: device_records' memory, or rgba
@@ -280,7 +274,8 @@ class VulkanFitterImpl final : public VulkanFitter {
   // and control sizes. *result_bytes gets the results' size.
   Status BindBatch(const Plan& plan, Batch* b, uint64_t lane_bytes, uint64_t control_bytes,
                    uint64_t* result_bytes);
-  void Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results);
+  void Finish(const TexelSampleChunk& chunk, const FitOptions& options, const Plan& plan,
+              const Batch& b, std::vector<TexelFit>* results);
   Status Ensure(gpu::Buffer* buffer, uint64_t bytes);
 
   std::unique_ptr<gpu::VkContext> ctx_;
@@ -329,9 +324,6 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
   const size_t problems = size_t(texels) * per_texel;
   b->begin = begin;
   b->end = end;
-  b->slot.resize(texels + 1);
-  b->slot[0] = 0;
-  for (uint32_t t = 0; t < texels; ++t) b->slot[t + 1] = b->slot[t] + 3 * chunk.SampleCount(begin + t);
   b->quad.resize(texels + 1);
   b->quad[0] = 0;
   for (uint32_t t = 0; t < texels; ++t) {
@@ -340,8 +332,6 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
   b->problems.resize(problems);
   b->solved.resize(problems);
   b->route.assign(problems, kRouteTrivial);
-  const uint64_t section = std::max<uint64_t>(1, b->slot[texels]);
-  b->records.resize(section * REFLCAP_FIT_RECORD_FLOATS);
   // On a device whose memory the host sees (lavapipe, integrated GPUs) the quads go straight into
   // the batch's texel buffer, which the device is not reading (it runs the other batch).
   const uint64_t quad_floats = std::max<uint64_t>(1, b->quad[texels]) * REFLCAP_FIT_QUAD_TEXELS * 4;
@@ -352,9 +342,6 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
     b->rgba.resize(quad_floats);
     b->quads = b->rgba.data();
   }
-  float* const section_of[REFLCAP_FIT_RECORD_FLOATS] = {
-      b->records.data(), b->records.data() + section, b->records.data() + 2 * section,
-      b->records.data() + 3 * section, b->records.data() + 4 * section};
   b->desc.resize(problems * desc_stride);
 
   // Thread time in PrepareTexel and in the layout below, in nanoseconds (VulkanFitStats).
@@ -385,14 +372,8 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
             PreparedProblem& problem = q[p];
             ResidualView& view = problem.residuals;
             const int count = view.count();
-            // The residuals move from the worker's arena (reused by the next texel) to the
-            // batch's sections, which outlive FinishProblem.
-            const uint64_t first = b->slot[t] + uint64_t(view.xx - arena.xx.data());
             const float* from[REFLCAP_FIT_RECORD_FLOATS] = {view.xx, view.yy, view.zz, view.y,
                                                             view.sw};
-            for (int k = 0; k < REFLCAP_FIT_RECORD_FLOATS; ++k) {
-              std::copy(from[k], from[k] + count, section_of[k] + first);
-            }
             if (problem.num_stages == 0) {
               // As the batched path: nothing to solve, the start is the answer.
               SolvedProblem& out = b->solved[i];
@@ -429,11 +410,9 @@ void VulkanFitterImpl::Prepare(const TexelSampleChunk& chunk, const FitOptions& 
               for (int j = 0; j < P; ++j) d[sh::kFitDescX0 + j] = FloatBits(float(problem.x0[j]));
               b->route[i] = kRouteDevice;
             }
-            view.xx = section_of[0] + first;
-            view.yy = section_of[1] + first;
-            view.zz = section_of[2] + first;
-            view.y = section_of[3] + first;
-            view.sw = section_of[4] + first;
+            // The arena is the next texel's: the view keeps the counts only (Finish prepares
+            // the texel again where a fallback or a retry reads residuals).
+            view.xx = view.yy = view.zz = view.y = view.sw = nullptr;
           }
           lap(&task_layout_ns);
         }
@@ -646,22 +625,26 @@ Status VulkanFitterImpl::RunClusters(const Plan& plan, VkPipeline pipeline, Batc
   return OkStatus();
 }
 
-void VulkanFitterImpl::Finish(const Plan& plan, const Batch& b, std::vector<TexelFit>* results) {
+void VulkanFitterImpl::Finish(const TexelSampleChunk& chunk, const FitOptions& options,
+                              const Plan& plan, const Batch& b, std::vector<TexelFit>* results) {
   const int per_texel = plan.per_texel;
   const int P = plan.num_params;
   const int stride = REFLCAP_FIT_OUT_STRIDE(P);
   const int packed = PackedIndex(P, 0);
+  std::atomic<uint64_t> reprepared{0};
   ParallelFor(
       0, b.end - b.begin, kTexelsPerTask,
-      [&](int64_t t0, int64_t t1, int) {
+      [&](int64_t t0, int64_t t1, int worker) {
         constexpr int kMaxPerTexel = ProblemsPerTexel(LobeModel::kAniso);  // aniso, iso: 3
         static_assert(kMaxPerTexel >= ProblemsPerTexel(LobeModel::kIso) &&
                       kMaxPerTexel >= ProblemsPerTexel(LobeModel::kShared));
         SolvedProblem solved[kMaxPerTexel], retried[kMaxPerTexel];
-        PreparedProblem retry[kMaxPerTexel];
+        PreparedProblem retry[kMaxPerTexel], again[kMaxPerTexel];
         int retry_problem[kMaxPerTexel];
+        uint64_t task_reprepared = 0;
         for (int64_t t = t0; t < t1; ++t) {
           const size_t first = size_t(t) * per_texel;
+          const uint32_t texel = b.begin + uint32_t(t);
           for (int p = 0; p < per_texel; ++p) {
             const size_t i = first + p;
             if (b.route[i] != kRouteDevice) {
@@ -677,21 +660,46 @@ void VulkanFitterImpl::Finish(const Plan& plan, const Batch& b, std::vector<Texe
             for (int j = 0; j < P; ++j) solved[p].x[j] = BitsFloat(w[sh::kFitOutX + j]);
             for (int k = 0; k < packed; ++k) solved[p].a[k] = BitsFloat(w[sh::kFitOutX + P + k]);
           }
+          // The batch's problems keep their residuals' counts only; a texel whose finishing
+          // reads residuals is prepared again into this worker's arena (the same problems: the
+          // preparation is deterministic).
+          const PreparedProblem* q = &b.problems[first];
+          auto with_residuals = [&]() {
+            if (q != again) {
+              size_t cursor = 0;
+              PrepareTexel(options, plan.layout, chunk.SamplesOf(texel), chunk.SampleCount(texel),
+                           int(texel), &arenas_[worker], &cursor, again);
+              q = again;
+              ++task_reprepared;
+            }
+          };
           if (plan.channel_retry) {
             // The few retried channels run the device's scalar twin here (lm.h in float).
-            const int n = PrepareChannelRetries(&b.problems[first], solved, per_texel, retry,
-                                                retry_problem);
+            int n = PrepareChannelRetries(q, solved, per_texel, retry, retry_problem);
+            if (n > 0 && q[0].residuals.y == nullptr) {
+              with_residuals();
+              n = PrepareChannelRetries(q, solved, per_texel, retry, retry_problem);
+            }
             for (int r = 0; r < n; ++r) {
               retried[r] = SolveScalar<float>(retry[r], plan.settings, plan.loss);
             }
             AdoptChannelRetries(retried, retry_problem, n, solved);
           }
-          TexelFit& fit = (*results)[b.begin + size_t(t)];
+          TexelFit& fit = (*results)[texel];
           BeginTexel(plan.layout.lobes, &fit);
-          for (int p = 0; p < per_texel; ++p) FinishProblem(b.problems[first + p], solved[p], &fit);
+          for (int p = 0; p < per_texel; ++p) {
+            if (FinishProblem(q[p], solved[p], &fit)) continue;
+            // A Lambert-only fallback needs the residuals: the texel again, from the start.
+            with_residuals();
+            BeginTexel(plan.layout.lobes, &fit);
+            for (int r = 0; r < per_texel; ++r) REFLCAP_CHECK(FinishProblem(q[r], solved[r], &fit));
+            break;
+          }
         }
+        reprepared += task_reprepared;
       },
       plan.workers);
+  stats_.reprepared_texels += reprepared;
 }
 
 Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& options,
@@ -812,7 +820,7 @@ Status VulkanFitterImpl::Fit(const TexelSampleChunk& chunk, const FitOptions& op
   };
   auto timed_finish = [&](const Batch& b) {
     const auto t0 = std::chrono::steady_clock::now();
-    Finish(plan, b, results);
+    Finish(chunk, options, plan, b, results);
     stats_.finish_seconds += Seconds(t0);
   };
   timed_prepare(cuts[0].first, cuts[0].second, &batches_[0]);

@@ -10,7 +10,9 @@
 //   GPU  the two-stage LM of every problem (lm.h's LmBegin / LmAdvance / Propose, the batched
 //        kernel's normal equations, in float);
 //   CPU  FinishProblem (rank test on the returned J^T J, standard deviations, status folding,
-//        natural units), on all cores.
+//        natural units), on all cores. The host keeps no copy of the residuals it laid out for
+//        the device: the few texels whose finishing reads them (a Lambert-only fallback, a
+//        channel retry) are prepared again.
 // The chunk is cut into batches (at most max_batch_problems problems and max_batch_residuals
 // residual records, and no binding over the device's maxStorageBufferRange); batch b + 1 is
 // prepared and batch b - 1 finished on the CPU while the device runs batch b (two buffer sets).
@@ -126,6 +128,9 @@ struct VulkanFitStats {
   double prepare_texel_thread_seconds = 0;
   double prepare_layout_thread_seconds = 0;
   double finish_seconds = 0;         // wall-clock time of the host's FinishProblem passes
+  // Texels prepared a second time while finishing, for their residuals (which the host does not
+  // keep): a Lambert-only fallback or a channel retry reads them.
+  uint64_t reprepared_texels = 0;
 };
 
 class VulkanFitter : public Fitter {

@@ -302,6 +302,47 @@ TEST_P(FitBackendTest, HardCaseSuiteAgreesWithTheCpuPath) {
   EXPECT_GT(compared, 50);
 }
 
+// The Vulkan fitter keeps no host copy of the residuals it lays out for the device; a texel
+// whose finishing reads them — a lobe beyond the evidence or a singular solve falls back to its
+// Lambert-only fit, a channel is retried — is prepared again. Every hard case with default
+// options in one chunk (several of them fall back): statuses, Lambert-only flags and fallback
+// albedos as the CPU path's, and some texel was prepared again (else this tests nothing).
+TEST_P(FitBackendTest, FallbacksReadTheResidualsTheyNeed) {
+  TexelSampleChunk chunk;
+  chunk.offsets = {0};
+  for (const testing::HardCase& c : testing::HardCaseSuite()) {
+    if (c.options.lobe_model != FitOptions{}.lobe_model) continue;  // default options only
+    chunk = chunk.texel_count == 0 ? testing::OneTexel(c.samples)
+                                   : Concatenate(chunk, testing::OneTexel(c.samples));
+  }
+  const FitOptions options;
+  const auto reference = RunFitter(SharedCpuFitter(), chunk, options);
+  const auto fits = Fit(chunk, options);
+  ASSERT_EQ(fits.size(), reference.size());
+  int fallbacks = 0;
+  for (size_t t = 0; t < fits.size(); ++t) {
+    EXPECT_EQ(fits[t].status, reference[t].status) << "texel " << t;
+    EXPECT_EQ(fits[t].lambert_only, reference[t].lambert_only) << "texel " << t;
+    const bool fell_back = (reference[t].status == FitStatus::kSingular ||
+                            reference[t].status == FitStatus::kUnidentifiableLobe) &&
+                           reference[t].lambert_only && reference[t].residuals > 0;
+    if (!fell_back) continue;
+    ++fallbacks;
+    // Lambert-only albedos are weighted means of the same residuals: float rounding apart
+    // (relative 1e-6), whichever LM ran before the fallback.
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(fits[t].params.rho_d[c], reference[t].params.rho_d[c],
+                  1e-6 * std::max(1e-30f, std::abs(reference[t].params.rho_d[c])))
+          << "texel " << t << " channel " << c;
+    }
+  }
+  EXPECT_GT(fallbacks, 0) << "no hard case fell back to Lambert: the suite changed";
+  if (vulkan()) {
+    EXPECT_GT(SharedVulkanFitter(kernel()).last_stats().reprepared_texels, 0u)
+        << "no texel was prepared again: the fallback path went untested";
+  }
+}
+
 // The truncated-solve catcher. lavapipe gives one invocation ~65,000 loop steps in all
 // (engine/gpu/device_info.h), and cuts every loop off silently beyond them. These texels have
 // 12,288 samples per channel and, from the fixed start, need ~30 LM steps: a solve in one
