@@ -77,6 +77,10 @@ stamp "fits done"
 # 3. Micro-benchmarks: fits/s over 10^6 texels, render batches, transfers.
 timeout 120 "$BUILD"/bench/engine/reflcap_fit_bench --benchmark_filter='BM_FitTexels.*/1000000' 2>&1 |
   grep -E "^BM_|device_" | tee "$OUT/fit_bench.txt"
+# The host's per-texel work on one thread of this host (PrepareTexel 5 us, FinishProblem 0.47 us
+# a problem on the 2-core VM): what sets prepare_s and finish_s above.
+timeout 60 "$BUILD"/bench/engine/reflcap_fit_bench --benchmark_filter='BM_PrepareTexel|BM_FinishProblem' 2>&1 |
+  grep -E "^BM_" | tee -a "$OUT/fit_bench.txt"
 # The batched renderer with one cost taken away at a time (aux read-back, host shadow edges,
 # shadow-map drawing), against the rasterised paths, with device timestamps: what limits it.
 # Then 1024 px.
