@@ -3,6 +3,12 @@
 #   blender -b -noaudio -P bench/blender/turntable_capture.py -- \
 #       --object knot --seed 2 --res 320 --spp 32 --out /tmp/blender_caps/knot
 #   blender -b -noaudio -P bench/blender/turntable_capture.py -- --check /tmp/blender_caps/knot
+#   blender -b -noaudio -P bench/blender/turntable_capture.py -- \
+#       --object teapot --rig suzanne --seed 3 --res 320 --spp 32 --out /tmp/blender_caps/teapot
+#
+# Objects: knot (torus-knot tube, own rig) and teapot (body of revolution with lid and knob,
+# handle, spout; suzanne's rig by default). --rig knot|suzanne picks the cameras, lights and
+# holdout split; "suzanne" is exactly the rig of shared/data/turntable/suzanne.
 #
 # The first command builds the object, bakes its ground-truth textures, writes mesh.obj,
 # renders every (turntable angle, camera, light) photograph, renders the silhouette masks and
@@ -28,19 +34,28 @@ from mathutils import Matrix, Vector
 from mathutils.bvhtree import BVHTree
 
 # ----------------------------------------------------------------------------------------------
-# Rig (world frame: z up; azimuth from +x towards +y; elevation above the target's z plane).
-CAM_EL = [15.0, 40.0, 65.0]
-CAM_AZ = 0.0
-CAM_DIST = 0.75
-LIGHT_EL = [25.0, 55.0]
-LIGHT_AZ = [-150.0, -90.0, -30.0, 30.0, 90.0, 150.0]
+# Rigs (world frame: z up; azimuth from +x towards +y; elevation above the target's z plane).
+# The cameras look at the object's bounding-box centre (the "target"); the lights are placed
+# around the same point. "knot" is the knot capture's own rig; "suzanne" is the rig of
+# shared/data/turntable/suzanne (its README and capture.json), with its fx = fy = 768 px kept.
+RIGS = {
+    "knot": {
+        "cam_el": [15.0, 40.0, 65.0], "cam_az": 0.0, "cam_dist": 0.75,
+        "fx": None,                  # None: fx so that the bounding box spans target_span
+        "target_span": 0.5,          # object bounding box / frame width, averaged over the views
+        "light_el": [25.0, 55.0], "light_az": [-150.0, -90.0, -30.0, 30.0, 90.0, 150.0],
+        "holdout_angles": [120.0, 240.0], "holdout_lights": ["L7"]},
+    "suzanne": {
+        "cam_el": [10.0, 30.0, 50.0, 70.0], "cam_az": 0.0, "cam_dist": 0.80,
+        "fx": 768.0, "target_span": None,
+        "light_el": [20.0, 45.0, 70.0], "light_az": [-90.0, -30.0, 30.0, 90.0, 150.0],
+        "holdout_angles": [90.0, 270.0], "holdout_lights": ["L9"]},
+}
 LIGHT_DIST = 1.0
 LIGHT_RADIUS = 0.002
 LIGHT_POWER = 30.0
 ANGLES = [30.0 * i for i in range(12)]
-HOLDOUT_ANGLES = [120.0, 240.0]   # these two angles (as suzanne's [90, 270]), not the interval
-HOLDOUT_LIGHTS = ["L7"]
-TARGET_SPAN = 0.5            # object bounding box / frame width, averaged over the views
+# Holdout angles are those angles (as suzanne's [90, 270]), not the interval between them.
 OBJECT_SIZE = 0.2            # metres, largest bounding-box side
 TEX_RES = 1024
 BAKE_MARGIN = 12
@@ -348,21 +363,203 @@ def knot_mesh(n_u=360, n_v=36, p=2, q=3, tube=(0.66, 0.12), tilt_deg=25.0):
     return verts, faces
 
 
-def build_object(name, uv_angle):
-    if name != "knot":
-        raise SystemExit("unknown --object %r (supported: knot)" % name)
-    verts, faces = knot_mesh()
-    mesh = bpy.data.meshes.new("knot")
+# Teapot: a Utah-teapot-like shape made of three closed parts (profile units: body radius 2).
+# Body and lid are one surface of revolution of the profile below, (r, z) from the bottom pole to
+# the top pole: flat base, rounded base edge, belly, shoulder, rim with an outward lip, a groove
+# between the rim and the lid, domed lid, knob on a neck.
+TEAPOT_PROFILE = [
+    (0.00, 0.00), (0.70, 0.00), (1.25, 0.00), (1.45, 0.02), (1.56, 0.10), (1.72, 0.32),
+    (1.90, 0.70), (2.00, 1.10), (1.95, 1.50), (1.80, 1.88), (1.60, 2.15), (1.47, 2.30),
+    (1.49, 2.38), (1.54, 2.43), (1.49, 2.48), (1.36, 2.46), (1.30, 2.50), (1.10, 2.60),
+    (0.75, 2.70), (0.40, 2.76), (0.22, 2.80), (0.17, 2.86), (0.26, 2.93), (0.37, 3.00),
+    (0.36, 3.08), (0.24, 3.15), (0.10, 3.18), (0.00, 3.185)]
+# Handle: a C-shaped centre line in the xz plane (y = 0), elliptic section (0.13 in the plane,
+# 0.21 across it). Spout: an S-shaped centre line, circular section tapering from 0.44 to 0.16
+# with a slight flare at the tip. Both start and end inside the body.
+TEAPOT_HANDLE = [(-1.45, 2.02), (-1.90, 2.16), (-2.45, 2.20), (-2.85, 1.98), (-3.00, 1.55),
+                 (-2.88, 1.12), (-2.50, 0.80), (-2.05, 0.62), (-1.55, 0.55)]
+TEAPOT_SPOUT = [(1.15, 0.70), (1.75, 0.78), (2.25, 1.05), (2.55, 1.55), (2.78, 2.10),
+                (3.02, 2.45), (3.22, 2.62)]
+
+
+def catmull_rom(points, samples_per_segment=40):
+    """Centripetal Catmull-Rom spline through the points (open curve, ends extrapolated)."""
+    p = np.asarray(points, dtype=np.float64)
+    p = np.vstack([2 * p[0] - p[1], p, 2 * p[-1] - p[-2]])
+    out = []
+    for i in range(1, len(p) - 2):
+        p0, p1, p2, p3 = p[i - 1], p[i], p[i + 1], p[i + 2]
+        t0 = 0.0
+        t1 = t0 + np.linalg.norm(p1 - p0) ** 0.5
+        t2 = t1 + np.linalg.norm(p2 - p1) ** 0.5
+        t3 = t2 + np.linalg.norm(p3 - p2) ** 0.5
+        t = np.linspace(t1, t2, samples_per_segment, endpoint=False)[:, None]
+        a1 = (t1 - t) / (t1 - t0) * p0 + (t - t0) / (t1 - t0) * p1
+        a2 = (t2 - t) / (t2 - t1) * p1 + (t - t1) / (t2 - t1) * p2
+        a3 = (t3 - t) / (t3 - t2) * p2 + (t - t2) / (t3 - t2) * p3
+        b1 = (t2 - t) / (t2 - t0) * a1 + (t - t0) / (t2 - t0) * a2
+        b2 = (t3 - t) / (t3 - t1) * a2 + (t - t1) / (t3 - t1) * a3
+        out.append((t2 - t) / (t2 - t1) * b1 + (t - t1) / (t2 - t1) * b2)
+    out.append(p[-2][None])
+    return np.vstack(out)
+
+
+def resample_curve(dense, n, turn_weight=0.0):
+    """n points along a polyline, evenly spaced in arc length + turn_weight * turning angle
+    (so that sharp features get more points)."""
+    seg = np.diff(dense, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    d = seg / np.maximum(length, 1e-12)[:, None]
+    turn = np.zeros(len(seg))
+    turn[1:] = np.arccos(np.clip((d[1:] * d[:-1]).sum(1), -1, 1))
+    measure = np.concatenate([[0.0], np.cumsum(length + turn_weight * turn)])
+    s = np.linspace(0.0, measure[-1], n)
+    return np.stack([np.interp(s, measure, dense[:, k]) for k in range(dense.shape[1])], 1)
+
+
+def tube_mesh(centre, radius_n, radius_b, n_around):
+    """Closed tube along a centre line in the xz plane: sections in the (in-plane normal, y)
+    frame with semi-axes radius_n, radius_b (arrays per centre point), both ends capped by a
+    triangle fan. Returns vertices (3D) and faces."""
+    c3 = np.stack([centre[:, 0], np.zeros(len(centre)), centre[:, 1]], 1)
+    tan = np.gradient(c3, axis=0)
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+    nrm = np.cross(tan, [0.0, 1.0, 0.0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    bin_ = np.array([0.0, 1.0, 0.0])
+    a = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
+    ring = (c3[:, None, :] + radius_n[:, None, None] * np.cos(a)[None, :, None] * nrm[:, None, :]
+            + radius_b[:, None, None] * np.sin(a)[None, :, None] * bin_[None, None, :])
+    n_c = len(centre)
+    verts = np.vstack([ring.reshape(-1, 3), c3[0], c3[-1]])
+    first, last = n_c * n_around, n_c * n_around + 1
+    faces = []
+    for i in range(n_c - 1):
+        for j in range(n_around):
+            j1 = (j + 1) % n_around
+            faces.append((i * n_around + j, (i + 1) * n_around + j,
+                          (i + 1) * n_around + j1, i * n_around + j1))
+    for j in range(n_around):
+        j1 = (j + 1) % n_around
+        faces.append((first, j1, j))
+        faces.append((last, (n_c - 1) * n_around + j, (n_c - 1) * n_around + j1))
+    return verts, faces
+
+
+def teapot_parts(n_around=96, n_profile=110, n_handle=64, n_handle_around=16, n_spout=64,
+                 n_spout_around=24):
+    """The teapot's three closed parts in profile units: [(name, vertices, faces)]."""
+    prof = resample_curve(catmull_rom(TEAPOT_PROFILE, 60), n_profile, turn_weight=0.25)
+    prof[0] = (0.0, prof[0, 1])
+    prof[-1] = (0.0, prof[-1, 1])
+    a = np.linspace(0.0, 2 * math.pi, n_around, endpoint=False)
+    inner = prof[1:-1]
+    ring = np.stack([inner[:, None, 0] * np.cos(a)[None, :], inner[:, None, 0] * np.sin(a)[None, :],
+                     np.repeat(inner[:, 1:2], n_around, 1)], 2).reshape(-1, 3)
+    bottom, top = len(ring), len(ring) + 1
+    body_v = np.vstack([ring, [0.0, 0.0, prof[0, 1]], [0.0, 0.0, prof[-1, 1]]])
+    body_f = []
+    n_r = len(inner)
+    for i in range(n_r - 1):
+        for j in range(n_around):
+            j1 = (j + 1) % n_around
+            body_f.append((i * n_around + j, i * n_around + j1, (i + 1) * n_around + j1,
+                           (i + 1) * n_around + j))
+    for j in range(n_around):
+        j1 = (j + 1) % n_around
+        body_f.append((bottom, j1, j))
+        body_f.append((top, (n_r - 1) * n_around + j, (n_r - 1) * n_around + j1))
+    hc = resample_curve(catmull_rom(TEAPOT_HANDLE, 40), n_handle)
+    handle_v, handle_f = tube_mesh(hc, np.full(n_handle, 0.13), np.full(n_handle, 0.21),
+                                   n_handle_around)
+    sc = resample_curve(catmull_rom(TEAPOT_SPOUT, 40), n_spout)
+    u = np.linspace(0.0, 1.0, n_spout)
+    sr = 0.44 - 0.30 * u ** 0.8 + 0.05 * np.clip((u - 0.88) / 0.12, 0, 1) ** 2
+    spout_v, spout_f = tube_mesh(sc, sr, sr, n_spout_around)
+    return [("body", body_v, body_f), ("handle", handle_v, handle_f),
+            ("spout", spout_v, spout_f)]
+
+
+def mesh_object(name, verts, faces):
+    mesh = bpy.data.meshes.new(name)
     mesh.from_pydata([tuple(v) for v in verts], [], faces)
     bm = bmesh.new()
     bm.from_mesh(mesh)
     bmesh.ops.recalc_face_normals(bm, faces=bm.faces[:])
+    bm.to_mesh(mesh)
+    bm.free()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def teapot_object():
+    """Body, handle and spout joined by Blender's exact boolean union into one closed mesh,
+    scaled to OBJECTS["teapot"]["size"] largest side, resting on z = 0, bounding box centred on the z axis."""
+    parts = teapot_parts()
+    allv = np.vstack([v for _, v, _ in parts])
+    scale = OBJECTS["teapot"]["size"] / (allv.max(0) - allv.min(0)).max()
+    objs = [mesh_object("teapot_" + n, v * scale, f) for n, v, f in parts]
+    body = objs[0]
+    for other in objs[1:]:
+        mod = body.modifiers.new("union_" + other.name, "BOOLEAN")
+        mod.operation = "UNION"
+        mod.solver = "EXACT"
+        mod.object = other
+    dg = bpy.context.evaluated_depsgraph_get()
+    mesh = bpy.data.meshes.new_from_object(body.evaluated_get(dg))
+    mesh.name = "teapot"
+    for o in objs:
+        m = o.data
+        bpy.data.objects.remove(o)
+        bpy.data.meshes.remove(m)
+    info = {"profile_units_to_m": float(scale),
+            "parts": {n: {"vertices": int(len(v)), "faces": len(f)} for n, v, f in parts}}
+    return mesh, info
+
+
+def build_object(name, uv_angle):
+    """The object, triangulated, smooth shaded, with a Smart UV Project atlas, and a dict of
+    facts about it for capture.json."""
+    info = {}
+    if name == "knot":
+        verts, faces = knot_mesh()
+        mesh = bpy.data.meshes.new("knot")
+        mesh.from_pydata([tuple(v) for v in verts], [], faces)
+    elif name == "teapot":
+        mesh, info = teapot_object()
+    else:
+        raise SystemExit("unknown --object %r (supported: %s)" % (name, ", ".join(OBJECTS)))
+    bm = bmesh.new()
+    bm.from_mesh(mesh)
+    if name == "teapot":
+        bmesh.ops.remove_doubles(bm, verts=bm.verts[:], dist=1e-7)
+        bmesh.ops.dissolve_degenerate(bm, dist=1e-8, edges=bm.edges[:])
+    bmesh.ops.recalc_face_normals(bm, faces=bm.faces[:])
     bmesh.ops.triangulate(bm, faces=bm.faces[:], quad_method="BEAUTY", ngon_method="BEAUTY")
     for f in bm.faces:
         f.smooth = True
+    if name == "teapot":
+        # Rest on z = 0 with the bounding box centred on the turntable axis.
+        co = np.array([v.co[:] for v in bm.verts])
+        lo, hi = co.min(0), co.max(0)
+        shift = Vector((-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]))
+        for v in bm.verts:
+            v.co += shift
+        info["shift_m"] = list(shift)
+        non_manifold = sum(1 for e in bm.edges if len(e.link_faces) != 2)
+        info["non_manifold_edges"] = non_manifold
+        info["boundary_edges"] = sum(1 for e in bm.edges if len(e.link_faces) < 2)
+        if non_manifold:
+            print("WARNING: teapot union has %d non-manifold edges" % non_manifold, flush=True)
     bm.to_mesh(mesh)
     bm.free()
-    obj = bpy.data.objects.new("knot", mesh)
+    if name == "teapot":
+        # Split normals at creases sharper than 60 deg (the seams where the handle and spout
+        # meet the body, the spout's end cap); mesh.obj carries the same per-corner normals.
+        mesh.use_auto_smooth = True
+        mesh.auto_smooth_angle = math.radians(60.0)
+    obj = bpy.data.objects.new(name, mesh)
     bpy.context.scene.collection.objects.link(obj)
     obj.rotation_mode = "XYZ"
     # Smart UV Project.
@@ -374,7 +571,16 @@ def build_object(name, uv_angle):
                              island_margin=0.008, area_weight=0.0, correct_aspect=True,
                              scale_to_bounds=False)
     bpy.ops.object.mode_set(mode="OBJECT")
-    return obj
+    return obj, info
+
+
+OBJECTS = {
+    # own rig, Voronoi base-colour patches, roughness regions
+    "knot": {"rig": "knot", "size": OBJECT_SIZE, "n_colour": 30, "n_rough": 12},
+    # 0.21 m (spout tip to handle): with suzanne's fx the bounding box spans 38-64 % of the
+    # frame width (suzanne: 43-63 %); the narrow views look along the spout.
+    "teapot": {"rig": "suzanne", "size": 0.21, "n_colour": 36, "n_rough": 14},
+}
 
 
 def mesh_arrays(obj):
@@ -398,10 +604,14 @@ def mesh_arrays(obj):
     return v.reshape(-1, 3), lv, ln.reshape(-1, 3), uv.reshape(-1, 2), corners
 
 
-def write_obj(path, obj):
+OBJ_TITLES = {"knot": "(2,3) torus-knot tube",
+              "teapot": "teapot (body of revolution + lid + knob, handle, spout; boolean union)"}
+
+
+def write_obj(path, obj, name):
     v, lv, ln, uv, corners = mesh_arrays(obj)
-    lines = ["# knot: (2,3) torus-knot tube, object frame (metres, z up), triangulated",
-             "# written by bench/blender/turntable_capture.py", "o knot"]
+    lines = ["# %s: %s, object frame (metres, z up), triangulated" % (name, OBJ_TITLES[name]),
+             "# written by bench/blender/turntable_capture.py", "o " + name]
     lines += ["v %.7f %.7f %.7f" % tuple(p) for p in v]
     uv_keys, uv_idx = np.unique(np.round(uv, 7), axis=0, return_inverse=True)
     n_keys, n_idx = np.unique(np.round(ln, 6), axis=0, return_inverse=True)
@@ -643,6 +853,23 @@ def add_light(name, pos):
 # ----------------------------------------------------------------------------------------------
 # Capture.
 
+def object_description(name, tube_mm):
+    if name == "knot":
+        return ("(2,3) torus knot (trefoil) tube: centre line ((2+cos 3t) cos 2t, "
+                "(2+cos 3t) sin 2t, -sin 3t), tube radius 0.66 + 0.12 cos 2t "
+                "(same units; %.1f-%.1f mm after scaling), Frenet-frame "
+                "circular sections, 360 x 36 quads, triangulated, tilted 25 deg "
+                "about x, scaled to 0.2 m largest side, smooth shading" % tube_mm)
+    return ("Utah-teapot-like shape: body and lid one surface of revolution (96 segments) of a "
+            "Catmull-Rom profile (flat base, belly, shoulder, rim with a lip, groove, domed lid, "
+            "knob on a neck); a C-shaped handle (elliptic swept tube, leaves a hole) and an "
+            "S-shaped spout (tapered circular swept tube, flat end cap), both closed; joined "
+            "by Blender's exact boolean union into one closed mesh, triangulated, smooth "
+            "shading with normals split at creases > 60 deg (per-corner vn in mesh.obj), "
+            "scaled to 0.21 m largest side (spout tip to handle), resting on z = 0, bounding "
+            "box centred on the turntable axis")
+
+
 def capture(args):
     t_start = time.time()
     out = os.path.abspath(args.out)
@@ -650,9 +877,17 @@ def capture(args):
         os.makedirs(os.path.join(out, sub), exist_ok=True)
     rng = np.random.default_rng(args.seed)
     scene = setup_scene(args.res, args.spp)
-    obj = build_object(args.object, args.uv_angle)
+    if args.object not in OBJECTS:
+        raise SystemExit("unknown --object %r (supported: %s)" % (args.object, ", ".join(OBJECTS)))
+    spec = OBJECTS[args.object]
+    rig_name = args.rig or spec["rig"]
+    rig = RIGS[rig_name]
+    CAM_EL, CAM_AZ, CAM_DIST = rig["cam_el"], rig["cam_az"], rig["cam_dist"]
+    LIGHT_EL, LIGHT_AZ = rig["light_el"], rig["light_az"]
+    HOLDOUT_ANGLES, HOLDOUT_LIGHTS = rig["holdout_angles"], rig["holdout_lights"]
+    obj, obj_info = build_object(args.object, args.uv_angle)
 
-    v, lv, ln, uv, corners = write_obj(os.path.join(out, "mesh.obj"), obj)
+    v, lv, ln, uv, corners = write_obj(os.path.join(out, "mesh.obj"), obj, args.object)
     ov, ovt, ovn, ofv, oft, ofn = read_obj(os.path.join(out, "mesh.obj"))
     export_check = {
         "obj_vertices": int(len(ov)), "obj_triangles": int(len(ofv)),
@@ -662,17 +897,18 @@ def capture(args):
         "max_abs_normal_diff": float(np.abs(ovn[ofn] - ln[corners]).max())}
     lo, hi = v.min(0), v.max(0)
     centre = np.array([0.0, 0.0, (lo[2] + hi[2]) / 2])
-    kv, _ = knot_mesh()
-    ring = np.linalg.norm(kv.reshape(360, 36, 3) - kv.reshape(360, 36, 3).mean(1, keepdims=True),
-                          axis=2).mean(1)
-    tube_mm = (1000 * ring.min(), 1000 * ring.max())
+    if args.object == "knot":
+        kv, _ = knot_mesh()
+        ring = np.linalg.norm(kv.reshape(360, 36, 3) - kv.reshape(360, 36, 3).mean(1, keepdims=True),
+                              axis=2).mean(1)
+        tube_mm = (1000 * ring.min(), 1000 * ring.max())
     tris = [tuple(x) for x in lv[corners].tolist()]
     bvh = BVHTree.FromPolygons([tuple(p) for p in v], tris, all_triangles=True)
     self_hits = [(i, j) for i, j in bvh.overlap(bvh)
                  if i < j and not set(tris[i]) & set(tris[j])]
     if self_hits:
         print("WARNING: %d intersecting triangle pairs" % len(self_hits), flush=True)
-    tex_stats = make_textures(obj, v, out, rng)
+    tex_stats = make_textures(obj, v, out, rng, spec["n_colour"], spec["n_rough"])
     uvp = np.stack([uv[:, 0] * 2048 - 0.5, (1 - uv[:, 1]) * 2048 - 0.5], 1)
     pix, _, _ = rasterize(uvp, np.arange(len(uv)).reshape(-1, 3), 2048, 2048)
     tex_stats["uv_overlapping_texels_at_2048"] = int((np.bincount(pix) > 1).sum())
@@ -683,7 +919,8 @@ def capture(args):
     obj.data.materials.append(mat)
     t_setup = time.time() - t_start
 
-    # Cameras: fx so that the object's projected bounding box spans TARGET_SPAN of the frame.
+    # Cameras: the rig's fx, or one so that the object's projected bounding box spans the rig's
+    # target_span of the frame (averaged over the views).
     poses = [look_at_cv(centre + CAM_DIST * sph(el, CAM_AZ), centre) for el in CAM_EL]
     spans1 = []
     for m in poses:
@@ -691,7 +928,10 @@ def capture(args):
             pc = (v @ rot_z(ang).T) @ m[:3, :3].T + m[:3, 3]
             x = pc[:, 0] / pc[:, 2]
             spans1.append(x.max() - x.min())
-    fx = round(TARGET_SPAN * args.res / float(np.mean(spans1)), 2)
+    if rig["fx"] is not None:
+        fx = rig["fx"] * args.res / 320.0
+    else:
+        fx = round(rig["target_span"] * args.res / float(np.mean(spans1)), 2)
     cx = cy = (args.res - 1) / 2.0
     K = [[fx, 0.0, cx], [0.0, fx, cy], [0.0, 0.0, 1.0]]
     cams = [add_camera("cam%d" % i, m, fx, args.res) for i, m in enumerate(poses)]
@@ -817,12 +1057,13 @@ def capture(args):
                               "meaning": "Principled BSDF 'Roughness' r; GGX alpha = r^2",
                               "encoding": "8-bit grey, linear: r = byte/255; Blender colour space "
                                           "'Non-Color'"},
-                "pattern": "3D Voronoi cells (nearest of 30 / 12 seed points spread over the "
+                "pattern": "3D Voronoi cells (nearest of %d / %d seed points spread over the "
                            "surface by farthest-point sampling), evaluated at each texel's "
                            "baked object-frame position (Cycles EMIT bake of the Object "
                            "coordinates, no margin); dilated by %d texels past the UV "
                            "islands (each ring the mean of its filled 8-neighbours); texels "
-                           "further out hold the median albedo and roughness 0.5" % BAKE_MARGIN,
+                           "further out hold the median albedo and roughness 0.5"
+                           % (spec["n_colour"], spec["n_rough"], BAKE_MARGIN),
                 "palette_srgb": [list(c) for c in PALETTE_SRGB],
                 "stats": tex_stats,
             },
@@ -831,13 +1072,10 @@ def capture(args):
                 "subsurface": 0.0, "anisotropic": 0.0, "sheen": 0.0, "clearcoat": 0.0,
                 "transmission": 0.0, "ior": 1.45, "distribution": "GGX"},
             "object": {
-                "kind": "knot",
-                "description": ("(2,3) torus knot (trefoil) tube: centre line ((2+cos 3t) cos 2t, "
-                                "(2+cos 3t) sin 2t, -sin 3t), tube radius 0.66 + 0.12 cos 2t "
-                                "(same units; %.1f-%.1f mm after scaling), Frenet-frame "
-                                "circular sections, 360 x 36 quads, triangulated, tilted 25 deg "
-                                "about x, scaled to 0.2 m largest side, smooth shading"
-                                % tube_mm),
+                "kind": args.object,
+                "description": object_description(args.object, tube_mm if args.object == "knot"
+                                                  else None),
+                "build": obj_info,
                 "material_seed": args.seed,
                 "vertices": int(len(v)), "triangles": int(len(corners)),
                 "self_intersecting_triangle_pairs": len(self_hits),
@@ -853,6 +1091,7 @@ def capture(args):
                        "intensity_rule": "I = P / (4 pi) (the suzanne capture's calibration of "
                                          "the same Blender version gives I/P = 0.079576)"},
             "rig": {
+                "name": rig_name,
                 "cam_el": CAM_EL, "cam_az": CAM_AZ, "cam_dist": CAM_DIST, "fx": fx,
                 "light_el": LIGHT_EL, "light_az": LIGHT_AZ, "light_dist": LIGHT_DIST,
                 "angles": ANGLES, "camera_target": centre.tolist(),
@@ -1136,7 +1375,10 @@ def check(cap_dir):
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     ap = argparse.ArgumentParser(prog="turntable_capture.py")
-    ap.add_argument("--object", default="knot")
+    ap.add_argument("--object", default="knot", choices=sorted(OBJECTS))
+    ap.add_argument("--rig", choices=sorted(RIGS),
+                    help="camera/light rig (default: the object's own: knot -> knot, "
+                         "teapot -> suzanne)")
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--res", type=int, default=320)
     ap.add_argument("--spp", type=int, default=32)
