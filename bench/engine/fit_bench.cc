@@ -8,6 +8,8 @@
 //                                 of 62,500 texels, as `reflcap fit` streams a sample store
 //                                 (memory stays at one chunk); Ceres stops at 10^4
 //   BM_LobeTests{PerSample,VectorLanes}  the post-fit passes' candidate-lobe scoring, both ways
+//   BM_PrepareTexel, BM_FinishProblem    the host's work before and after every backend's LM, on
+//                                 one thread (what sets a GPU run's prepare_s and finish_s)
 //
 // Every benchmark first fits its data once and checks the result against ground truth
 // (converged fraction and median relative errors, reported as counters); timing only counts
