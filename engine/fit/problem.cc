@@ -561,15 +561,15 @@ bool FinishProblem(const PreparedProblem& q, const SolvedProblem& solved_in, Tex
     status = FitStatus::kSingular;
   }
 
-  // A lobe the data cannot pin down — the LM ended singular, or the lobe rises far above every
-  // sample somewhere on the hemisphere (extrapolation, not measurement) — is replaced by the
-  // problem's Lambert-only fit, and the status says why (kSingular, kUnidentifiableLobe).
   // The solution as it is kept: parameters and cost (LambertFallback may replace both), not a
   // copy of the whole SolvedProblem (its normal equations are only read, from solved_in).
   double x[kMaxParams];
   for (int j = 0; j < kMaxParams; ++j) x[j] = solved_in.x[j];
   double cost = solved_in.cost;
   const uint32_t free_mask = solved_in.free_mask;
+  // A lobe the data cannot pin down — the LM ended singular, or the lobe rises far above every
+  // sample somewhere on the hemisphere (extrapolation, not measurement) — is replaced by the
+  // problem's Lambert-only fit, and the status says why (kSingular, kUnidentifiableLobe).
   bool fell_back = false;
   if (layout.lobes > 0 && !q.lambert_only && residuals > 0 &&
       (status == FitStatus::kSingular || LobeExceedsEvidence(layout, x))) {
