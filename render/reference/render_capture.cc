@@ -293,6 +293,8 @@ IndirectEvidence MeasureIndirectEvidence(const FittedCapture& fitted,
   return evidence;
 }
 
+namespace {
+
 // 1 / the photograph's "white" for display-referred errors (PSNR-L's, engine/image/ldr.h): its
 // 99th percentile over the channels of its lit, usable pixels; nullopt for a black photograph
 // (nothing to see). A photograph lit only by values <= 0 (noise) scales by 1.
@@ -309,6 +311,8 @@ std::optional<double> DisplayInvWhite(const Image& photo, const CaptureImage& im
   if (!white) return std::nullopt;
   return *white > 0 ? 1.0 / *white : 1.0;
 }
+
+}  // namespace
 
 PixelEvidence MeasurePixelEvidence(const FittedCapture& fitted, bool cast_shadows,
                                    const EvidenceRender& render) {
