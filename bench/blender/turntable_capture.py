@@ -629,14 +629,19 @@ def write_obj(path, obj, name):
 # ----------------------------------------------------------------------------------------------
 # Ground-truth textures: 3D Voronoi patches on the surface, baked through texel positions.
 
-def bake_texel_positions(obj, lo, ext):
-    """Bakes each texel's object-frame position (EMIT of normalised Object coordinates) and a
-    coverage mask (EMIT of white), both without margin."""
-    mat = bpy.data.materials.new("bake")
+def node_material(name):
+    """A new material with an empty node tree but its output node: (material, tree, output)."""
+    mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    return mat, nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
+
+def bake_texel_positions(obj, lo, ext):
+    """Bakes each texel's object-frame position (EMIT of normalised Object coordinates) and a
+    coverage mask (EMIT of white), both without margin."""
+    mat, nt, out = node_material("bake")
     emi = nt.nodes.new("ShaderNodeEmission")
     tc = nt.nodes.new("ShaderNodeTexCoord")
     sub = nt.nodes.new("ShaderNodeVectorMath")
@@ -740,11 +745,7 @@ def make_textures(obj, verts, out_dir, rng, n_colour=30, n_rough=12):
 
 
 def render_material(out_dir):
-    mat = bpy.data.materials.new("principled_gt")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    mat, nt, out = node_material("principled_gt")
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.distribution = "GGX"
     uvn = nt.nodes.new("ShaderNodeUVMap")
@@ -985,11 +986,7 @@ def capture(args):
 
     # Masks: emission override, no lights, one ray through each pixel centre.
     t_mask0 = time.time()
-    emat = bpy.data.materials.new("mask_emission")
-    emat.use_nodes = True
-    en = emat.node_tree
-    en.nodes.clear()
-    eo = en.nodes.new("ShaderNodeOutputMaterial")
+    emat, en, eo = node_material("mask_emission")
     ee = en.nodes.new("ShaderNodeEmission")
     ee.inputs["Color"].default_value = (1, 1, 1, 1)
     ee.inputs["Strength"].default_value = 1.0

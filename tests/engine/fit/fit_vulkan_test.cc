@@ -329,7 +329,8 @@ TEST_P(FitBackendTest, FallbacksReadTheResidualsTheyNeed) {
     if (!fell_back) continue;
     ++fallbacks;
     // Lambert-only albedos are weighted means of the same residuals: float rounding apart
-    // (relative 1e-6), whichever LM ran before the fallback.
+    // (relative 1e-6), whichever LM ran before the fallback. The 1e-30 floor keeps the bound
+    // positive for a black channel, where both must be exactly 0.
     for (int c = 0; c < 3; ++c) {
       EXPECT_NEAR(fits[t].params.rho_d[c], reference[t].params.rho_d[c],
                   1e-6 * std::max(1e-30f, std::abs(reference[t].params.rho_d[c])))
