@@ -257,6 +257,9 @@ struct FitPass {
   std::vector<std::optional<TexelSampleChunk>> cached;
   uint64_t cached_bytes = 0;
   double read_seconds = 0, fit_seconds = 0, checkpoint_seconds = 0;
+  // Before the first chunk (the fitter's creation: a Vulkan device; the store opened; the
+  // result store allocated), and the fitter's release after the last (0 for a merge).
+  double setup_seconds = 0, release_seconds = 0;
   size_t iso_chosen = 0;  // --lobe-model auto: texels that kept the isotropic fit
   VulkanFitStats vulkan_stats;  // summed over the chunks (kVulkan)
   bool used_vulkan = false;
@@ -729,7 +732,9 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   }
   const double write_seconds_so_far = Seconds(write_start);
   summary.total_seconds = Seconds(start);
-  report["timings_s"] = {{"read_wait", read_seconds},
+  report["timings_s"] = {{"setup", pass->setup_seconds},
+                         {"release_fitter", pass->release_seconds},
+                         {"read_wait", read_seconds},
                          {"checkpoint_write", pass->checkpoint_seconds},
                          {"fit", fit_seconds},
                          {"lobe_transfer", transfer_seconds},
@@ -802,12 +807,15 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     pass.cached.resize(info.chunks);
   }
   const std::string device = fitter->device();
+  pass.setup_seconds = Seconds(start);
   REFLCAP_RETURN_IF_ERROR(
       FitChunks(*store, range, fitter.get(), options, checkpoint, control.resume, &pass));
   // The fitter's per-worker workspaces and the chunk results are sized by the largest chunk;
   // nothing needs them past the fit.
+  const auto release_start = std::chrono::steady_clock::now();
   fitter.reset();
   ReleaseFreeHeap();
+  pass.release_seconds = Seconds(release_start);
 
   if (sharded) {
     // The part: the checkpoint's chunk result files and the manifest with what this shard did.

@@ -276,9 +276,37 @@ LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
   REFLCAP_CHECK(!lenders || lenders->size() == fits.size());
   LobeCandidates candidates;
   if (!options.enabled) return candidates;
+  // The donors in atlas space: the texel at each pixel that may lend (-1: none), and a
+  // summed-area table of their count, so that a recipient with no donor in its window (most of
+  // them from the second round on, where only the last round's borrowers lend) is passed over in
+  // O(1), and one with donors reads a compact grid instead of the fit store per pixel. The
+  // candidates are those of a plain scan of every window (the window relation is symmetric).
+  const size_t width = size_t(atlas.width), height = size_t(atlas.height);
   // FitStore::kMaxTexels keeps texel indices within int32.
-  std::vector<int32_t> texel_at(size_t(atlas.width) * atlas.height, -1);
-  for (size_t t = 0; t < fits.size(); ++t) texel_at[atlas.pixel_of_texel[t]] = int32_t(t);
+  std::vector<int32_t> donor_at(width * height, -1);
+  ParallelFor(0, int64_t(fits.size()), 1 << 16, [&](int64_t begin, int64_t end, int) {
+    for (int64_t d = begin; d < end; ++d) {
+      if ((lenders && !(*lenders)[size_t(d)]) || !IsDonor(fits, size_t(d))) continue;
+      donor_at[atlas.pixel_of_texel[size_t(d)]] = int32_t(d);  // one texel per pixel: no race
+    }
+  });
+  // count[(y + 1) * (width + 1) + x + 1] = donors in pixels [0, x] x [0, y].
+  std::vector<uint32_t> count((width + 1) * (height + 1), 0);
+  for (size_t y = 0; y < height; ++y) {
+    uint32_t row = 0;
+    const int32_t* src = donor_at.data() + y * width;
+    const uint32_t* above = count.data() + y * (width + 1);
+    uint32_t* out = count.data() + (y + 1) * (width + 1);
+    for (size_t x = 0; x < width; ++x) {
+      row += src[x] >= 0;
+      out[x + 1] = above[x + 1] + row;
+    }
+  }
+  const auto donors_in = [&](size_t x0, size_t y0, size_t x1, size_t y1) {  // inclusive bounds
+    const size_t w1 = width + 1;
+    return count[(y1 + 1) * w1 + x1 + 1] - count[y0 * w1 + x1 + 1] - count[(y1 + 1) * w1 + x0] +
+           count[y0 * w1 + x0];
+  };
   // Each block of texels collects its rows on its own; the blocks are joined in texel order, so
   // the result does not depend on which thread ran which block.
   constexpr int64_t kBlock = 4096;  // texels per block: enough work per block to amortise a task
@@ -289,27 +317,33 @@ LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
   };
   std::vector<Rows> blocks(size_t((int64_t(fits.size()) + kBlock - 1) / kBlock));
   std::atomic<size_t> recipients{0}, no_donor{0};
+  const int r = options.radius;
   ParallelFor(0, int64_t(fits.size()), kBlock, [&](int64_t begin, int64_t end, int) {
     Rows& rows = blocks[size_t(begin / kBlock)];
     std::vector<std::pair<double, uint32_t>> found;
+    size_t block_recipients = 0, block_no_donor = 0;
     for (int64_t t = begin; t < end; ++t) {
       if (!IsRecipient(fits, size_t(t))) continue;
-      ++recipients;
+      ++block_recipients;
       const int x0 = int(atlas.pixel_of_texel[t] % uint32_t(atlas.width));
       const int y0 = int(atlas.pixel_of_texel[t] / uint32_t(atlas.width));
+      const size_t xa = size_t(std::max(0, x0 - r)), xb = size_t(std::min(atlas.width - 1, x0 + r));
+      const size_t ya = size_t(std::max(0, y0 - r)), yb = size_t(std::min(atlas.height - 1, y0 + r));
       found.clear();
-      for (int y = std::max(0, y0 - options.radius);
-           y <= std::min(atlas.height - 1, y0 + options.radius); ++y) {
-        for (int x = std::max(0, x0 - options.radius);
-             x <= std::min(atlas.width - 1, x0 + options.radius); ++x) {
-          const int32_t d = texel_at[size_t(y) * atlas.width + x];
-          if (d < 0 || (lenders && !(*lenders)[d]) || !IsDonor(fits, size_t(d))) continue;
-          const double distance = AlbedoDistance(fits.params(size_t(t)), fits.params(size_t(d)));
-          if (distance <= options.albedo_tolerance) found.emplace_back(distance, uint32_t(d));
+      if (donors_in(xa, ya, xb, yb) > 0) {
+        const float* albedo = fits.params(size_t(t));
+        for (size_t y = ya; y <= yb; ++y) {
+          const int32_t* row = donor_at.data() + y * width;
+          for (size_t x = xa; x <= xb; ++x) {
+            const int32_t d = row[x];
+            if (d < 0) continue;
+            const double distance = AlbedoDistance(albedo, fits.params(size_t(d)));
+            if (distance <= options.albedo_tolerance) found.emplace_back(distance, uint32_t(d));
+          }
         }
       }
       if (found.empty()) {
-        ++no_donor;
+        ++block_no_donor;
         continue;
       }
       const size_t keep = std::min(found.size(), size_t(kMaxTransferCandidates));
@@ -318,6 +352,8 @@ LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
       rows.counts.push_back(uint8_t(keep));
       for (size_t i = 0; i < keep; ++i) rows.donors.push_back(found[i].second);
     }
+    recipients += block_recipients;
+    no_donor += block_no_donor;
   });
   size_t total_recipients = 0, total_donors = 0;
   for (const Rows& rows : blocks) {

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -159,6 +161,121 @@ TEST(LobeTransfer, ABorrowedLobeIsLentOnInTheNextRound) {
   ApplyLobeTransfer(chunk, candidates, options, 0.05, 1, &store, &round2);
   EXPECT_EQ(store.donor(2), 1);
   EXPECT_EQ(store.Get(2).params.lobes[0][1].n, truth.lobes[0][1].n);
+}
+
+// A plain scan of every recipient's window, as lobe_transfer.h states the rule: FindLobeDonors
+// skips windows without a donor and reads a grid of the donors, and must find exactly this.
+std::vector<std::vector<uint32_t>> PlainScan(const TexelAtlas& atlas, const FitStore& fits,
+                                             const LobeTransferOptions& options,
+                                             const std::vector<uint8_t>* lenders) {
+  const auto albedo_distance = [&](size_t a, size_t b) {
+    double diff = 0, na = 0, nb = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double x = fits.params(a)[c], y = fits.params(b)[c];
+      diff += (x - y) * (x - y);
+      na += x * x;
+      nb += y * y;
+    }
+    return std::sqrt(diff) / std::max({std::sqrt(na), std::sqrt(nb), 1e-3});
+  };
+  std::vector<std::vector<uint32_t>> out(fits.size());
+  for (size_t t = 0; t < fits.size(); ++t) {
+    if (!(fits.status(t) == FitStatus::kUnidentifiableLobe && fits.samples(t) >= 3 &&
+          fits.lambert_only(t) && fits.donor(t) == FitStore::kNoDonor)) {
+      continue;
+    }
+    const int xt = int(atlas.pixel_of_texel[t] % uint32_t(atlas.width));
+    const int yt = int(atlas.pixel_of_texel[t] / uint32_t(atlas.width));
+    std::vector<std::pair<double, uint32_t>> found;
+    for (size_t d = 0; d < fits.size(); ++d) {
+      const int xd = int(atlas.pixel_of_texel[d] % uint32_t(atlas.width));
+      const int yd = int(atlas.pixel_of_texel[d] / uint32_t(atlas.width));
+      if (std::abs(xd - xt) > options.radius || std::abs(yd - yt) > options.radius) continue;
+      if (lenders && !(*lenders)[d]) continue;
+      if (fits.lambert_only(d) ||
+          !(fits.status(d) == FitStatus::kConverged || fits.donor(d) >= 0)) {
+        continue;
+      }
+      const double distance = albedo_distance(t, d);
+      if (distance <= options.albedo_tolerance) found.emplace_back(distance, uint32_t(d));
+    }
+    std::sort(found.begin(), found.end());
+    for (size_t i = 0; i < found.size() && i < size_t(kMaxTransferCandidates); ++i) {
+      out[t].push_back(found[i].second);
+    }
+  }
+  return out;
+}
+
+TEST(LobeTransfer, CandidatesAreThoseOfAPlainScanOfEveryWindow) {
+  // 600 texels on random pixels of a 47 x 31 atlas (a third of the pixels empty), in three
+  // materials with albedo jitter around the tolerance: donors, recipients, Lambert-only texels,
+  // texels that borrowed; windows clipped at all four borders. Then a later round, where only
+  // random lenders lend.
+  uint32_t state = 12345;
+  const auto next = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return state >> 8;
+  };
+  TexelAtlas atlas;
+  atlas.width = 47;
+  atlas.height = 31;
+  std::vector<uint32_t> pixels(size_t(atlas.width * atlas.height));
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint32_t(i);
+  for (size_t i = pixels.size() - 1; i > 0; --i) std::swap(pixels[i], pixels[next() % (i + 1)]);
+  const size_t texels = 600;
+  atlas.pixel_of_texel.assign(pixels.begin(), pixels.begin() + texels);
+  const std::array<std::array<float, 3>, 3> materials = {
+      {{0.4f, 0.3f, 0.2f}, {0.1f, 0.5f, 0.2f}, {0.42f, 0.33f, 0.2f}}};
+  std::vector<TexelFit> fits;
+  std::vector<int64_t> donor_of(texels, FitStore::kNoDonor);
+  for (size_t t = 0; t < texels; ++t) {
+    std::array<float, 3> rho = materials[next() % 3];
+    for (float& v : rho) v *= 1.0f + 0.2f * (float(next() % 1000) / 1000.0f - 0.5f);
+    const uint32_t role = next() % 10;
+    TexelFit f = role < 3 ? DonorFit(Glossy()) : RecipientFit(rho);
+    f.params.rho_d = rho;
+    if (role == 9) f.samples = 2;                  // too few samples to be a recipient
+    if (role == 8) f.status = FitStatus::kConverged;  // Lambert-only, lobe absent: neither
+    if (role == 7) {                               // borrowed: lends, receives no more
+      f.lambert_only = false;
+      donor_of[t] = int64_t(next() % texels);
+    }
+    fits.push_back(f);
+  }
+  FitStore store = StoreOf(fits);
+  for (size_t t = 0; t < texels; ++t) {
+    if (donor_of[t] != FitStore::kNoDonor) store.set_donor(t, donor_of[t]);
+  }
+  std::vector<uint8_t> lenders(texels);
+  for (uint8_t& l : lenders) l = next() % 4 == 0;
+  size_t found = 0, not_found = 0;
+  for (int radius : {1, 3, 6}) {
+    for (const std::vector<uint8_t>* lend : {static_cast<const std::vector<uint8_t>*>(nullptr),
+                                             static_cast<const std::vector<uint8_t>*>(&lenders)}) {
+      LobeTransferOptions options;
+      options.radius = radius;
+      LobeTransferStats stats;
+      const LobeCandidates got = FindLobeDonors(atlas, store, options, &stats, lend);
+      const std::vector<std::vector<uint32_t>> want = PlainScan(atlas, store, options, lend);
+      size_t recipients = 0, with_candidates = 0;
+      for (uint32_t t = 0; t < texels; ++t) {
+        EXPECT_EQ(got.Of(t), want[t]) << "texel " << t << ", radius " << radius;
+        with_candidates += !want[t].empty();
+      }
+      for (size_t t = 0; t < texels; ++t) {
+        recipients += store.status(t) == FitStatus::kUnidentifiableLobe && store.samples(t) >= 3 &&
+                      store.lambert_only(t) && store.donor(t) == FitStore::kNoDonor;
+      }
+      EXPECT_EQ(stats.recipients, recipients);
+      EXPECT_EQ(stats.no_donor, recipients - with_candidates);
+      found += with_candidates;
+      not_found += recipients - with_candidates;
+    }
+  }
+  // Not vacuous: many recipients find candidates, and many do not.
+  EXPECT_GT(found, 100u);
+  EXPECT_GT(not_found, 100u);
 }
 
 // Samples in every direction (some below the horizon: not usable), with a NaN value, a zero and
