@@ -57,11 +57,12 @@ StatusOr<FitBackendChoice> ResolveFitBackend(const std::string& name, const std:
 struct FitFlags {
   std::string lobe_model = "aniso", init = "seed", loss = "none", vulkan_kernel = "auto";
   std::string model_choice = "kfold";
-  int cluster_size = 0;
+  int cluster_size = 0, chunks_in_flight = 0;
   bool no_channel_retry = false, no_albedo_fill = false, no_lobe_transfer = false;
   bool no_material_clusters = false;
   bool no_diffuse_falloff = false;
-  // The Vulkan fitter's kernel and cluster size (after Apply; its device comes from --device).
+  // The Vulkan fitter's kernel, cluster size and chunks in flight (after Apply; its device
+  // comes from --device).
   fit::VulkanFitterOptions vulkan;
   void Register(ArgParser* args, fit::FitOptions* options);
   Status Apply(fit::FitOptions* options);

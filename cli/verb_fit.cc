@@ -62,6 +62,10 @@ void FitFlags::Register(ArgParser* args, fit::FitOptions* options) {
   args->AddInt("cluster-size", &cluster_size,
                "clusters kernel: invocations per problem, a power of two up to 32 and the "
                "device's subgroup size (default 0 = 8)");
+  args->AddInt("vulkan-chunks-in-flight", &chunks_in_flight,
+               "store chunks fitted at once on the Vulkan device: 2 (a second fitter: one "
+               "chunk's LM runs while the host prepares the next), 1, or 0 = automatic (default: "
+               "2 on a GPU, 1 on lavapipe)");
 }
 
 Status FitFlags::Apply(fit::FitOptions* options) {
@@ -82,6 +86,11 @@ Status FitFlags::Apply(fit::FitOptions* options) {
   if (Status s = vulkan.Validate(); !s.ok()) {
     return InvalidArgumentError("--cluster-size: ", s.message());
   }
+  if (chunks_in_flight < 0 || chunks_in_flight > 2) {
+    return InvalidArgumentError("--vulkan-chunks-in-flight must be 0, 1 or 2, got ",
+                                chunks_in_flight);
+  }
+  vulkan.chunks_in_flight = uint32_t(chunks_in_flight);
   // auto: aniso and iso per texel, the better by BIC (FitOptions::select_lobe_model).
   const bool auto_model = lobe_model == "auto";
   REFLCAP_ASSIGN_OR_RETURN(options->lobe_model,

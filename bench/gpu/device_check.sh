@@ -66,11 +66,16 @@ done
 for th in 4 8; do
   "$R" fit /tmp/mil_run/samples --out /tmp/fit_t$th --backend vulkan --threads $th --quiet > /dev/null 2>&1
 done
-# Stages at 4, 8 and 16 threads (vulkan), and the CPU backend's at 16: a stage that does not
-# shrink with threads is serial; setup is the fitter's creation (a Vulkan device).
+# One chunk at a time (the default on a GPU is two in flight, each on its own fitter).
+"$R" fit /tmp/mil_run/samples --out /tmp/fit_seq --backend vulkan --vulkan-chunks-in-flight 1 \
+  --quiet > /dev/null 2>&1
+# Stages at 4, 8 and 16 threads (vulkan), one chunk in flight at 16, and the CPU backend's at
+# 16: a stage that does not shrink with threads is serial; setup is the fitter's creation (a
+# Vulkan device).
 python3 - "$OUT" <<'PY' | tee "$OUT/fit_threads.txt"
 import json, sys
-cols = (("4", "/tmp/fit_t4"), ("8", "/tmp/fit_t8"), ("16", "/tmp/fit_vulkan"), ("cpu16", "/tmp/fit_cpu"))
+cols = (("4", "/tmp/fit_t4"), ("8", "/tmp/fit_t8"), ("16", "/tmp/fit_vulkan"),
+        ("seq16", "/tmp/fit_seq"), ("cpu16", "/tmp/fit_cpu"))
 rows = {}
 for name, d in cols:
     try:

@@ -263,6 +263,7 @@ struct FitPass {
   size_t iso_chosen = 0;  // --lobe-model auto: texels that kept the isotropic fit
   VulkanFitStats vulkan_stats;  // summed over the chunks (kVulkan)
   bool used_vulkan = false;
+  uint32_t chunks_in_flight = 1;  // chunks fitted at once (VulkanFitterOptions::chunks_in_flight)
   uint32_t fitted_chunks = 0, resumed_chunks = 0;
 };
 
@@ -305,10 +306,13 @@ Status Keep(uint32_t first_texel, const std::vector<TexelFit>& results, FitPass*
 // The per-chunk phase over chunks [range.begin, range.end): each chunk fitted (the next read on
 // a thread meanwhile) and its results kept in the pass and, when `checkpoint` is not empty,
 // written there as a chunk result file. With `resume`, chunks whose result file is already there
-// are read instead of fitted.
+// are read instead of fitted. With `second` (which returns a second fitter, or null when there is
+// none after all; called once, when the second chunk is due), two chunks are fitted at once,
+// each on its own fitter (VulkanFitterOptions::chunks_in_flight); results are kept in chunk
+// order all the same, so they do not depend on it.
 Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitter,
-                 const FitOptions& options, const fs::path& checkpoint, bool resume,
-                 FitPass* pass) {
+                 const std::function<Fitter*()>& second, const FitOptions& options,
+                 const fs::path& checkpoint, bool resume, FitPass* pass) {
   const SampleStoreInfo& info = store.info();
   uint64_t range_texels = 0;
   for (uint32_t c = range.begin; c < range.end; ++c) range_texels += ChunkTexelCount(info, c);
@@ -341,7 +345,6 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
   const bool keep_chunks = (options.lobe_transfer.enabled || options.clusters.enabled) &&
                            options.lobes > 0 && pass->cached.size() == info.chunks;
   const uint64_t cache_budget = keep_chunks ? SampleCacheBudget() : 0;
-  std::vector<TexelFit> results, iso_results;
   // Chunks read ahead, each on a thread of its own, in order.
   auto read = [&store](uint32_t index) { return store.ReadChunk(index); };
   std::deque<std::future<StatusOr<TexelSampleChunk>>> ahead;
@@ -351,24 +354,46 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       ahead.push_back(std::async(std::launch::async, read, todo[issued++]));
     }
   };
-  read_ahead();
-  for (size_t k = 0; k < todo.size(); ++k) {
-    const uint32_t c = todo[k];
-    const auto read_start = std::chrono::steady_clock::now();
-    StatusOr<TexelSampleChunk> chunk = ahead.front().get();
-    ahead.pop_front();
-    pass->read_seconds += Seconds(read_start);
-    if (!chunk.ok()) return chunk.status();
-    read_ahead();
-    if (uint64_t(chunk->first_texel) + chunk->texel_count > info.texels) {
-      return DataLossError(store.ChunkPath(c).string(), ": texels ", chunk->first_texel, "..",
-                           chunk->first_texel + chunk->texel_count, " beyond the store's ",
-                           info.texels);
+  // A chunk being fitted: its samples, its results and what the fitter said of it.
+  struct Job {
+    uint32_t c = 0;
+    TexelSampleChunk chunk;
+    std::vector<TexelFit> results, iso_results;
+    size_t iso_chosen = 0;
+    bool used_vulkan = false;
+    VulkanFitStats vulkan_stats;
+    std::future<Status> done;
+  };
+  const auto fit_job = [&](Fitter* f, Job* job) -> Status {
+    REFLCAP_RETURN_IF_ERROR(f->Fit(job->chunk, options, &job->results));
+    if (const auto* vk = dynamic_cast<const VulkanFitter*>(f)) {
+      job->vulkan_stats = vk->last_stats();
+      job->used_vulkan = true;
     }
+    if (select_model) {
+      REFLCAP_RETURN_IF_ERROR(f->Fit(job->chunk, iso_options, &job->iso_results));
+      for (size_t i = 0; i < job->results.size(); ++i) {
+        if (Bic(job->iso_results[i], LobeModel::kIso, options.lobes) <
+            Bic(job->results[i], LobeModel::kAniso, options.lobes)) {
+          job->results[i] = job->iso_results[i];
+          ++job->iso_chosen;
+        }
+      }
+    }
+    return OkStatus();
+  };
+  // The oldest job: waited for (the wait is the pass's fit time), then kept, checkpointed and
+  // its chunk cached.
+  std::deque<std::unique_ptr<Job>> running;
+  const auto complete_oldest = [&]() -> Status {
+    std::unique_ptr<Job> job = std::move(running.front());
+    running.pop_front();
     const auto fit_start = std::chrono::steady_clock::now();
-    REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, options, &results));
-    if (const auto* vk = dynamic_cast<const VulkanFitter*>(fitter)) {
-      const VulkanFitStats& st = vk->last_stats();
+    const Status fitted = job->done.get();
+    pass->fit_seconds += Seconds(fit_start);
+    REFLCAP_RETURN_IF_ERROR(fitted);
+    if (job->used_vulkan) {
+      const VulkanFitStats& st = job->vulkan_stats;
       VulkanFitStats& sum = pass->vulkan_stats;
       sum.kernel = st.kernel;
       sum.cluster_size = st.cluster_size;
@@ -386,33 +411,61 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
       sum.reprepared_texels += st.reprepared_texels;
       pass->used_vulkan = true;
     }
-    if (select_model) {
-      REFLCAP_RETURN_IF_ERROR(fitter->Fit(*chunk, iso_options, &iso_results));
-      for (size_t i = 0; i < results.size(); ++i) {
-        if (Bic(iso_results[i], LobeModel::kIso, options.lobes) <
-            Bic(results[i], LobeModel::kAniso, options.lobes)) {
-          results[i] = iso_results[i];
-          ++pass->iso_chosen;
-        }
-      }
-    }
-    pass->fit_seconds += Seconds(fit_start);
-    REFLCAP_RETURN_IF_ERROR(Keep(chunk->first_texel, results, pass));
+    pass->iso_chosen += job->iso_chosen;
+    const TexelSampleChunk& chunk = job->chunk;
+    REFLCAP_RETURN_IF_ERROR(Keep(chunk.first_texel, job->results, pass));
     if (!checkpoint.empty()) {
       const auto write_start = std::chrono::steady_clock::now();
-      REFLCAP_RETURN_IF_ERROR(
-          WriteFitChunk(checkpoint / FitChunkFileName(c), chunk->first_texel, options.lobes, results));
+      REFLCAP_RETURN_IF_ERROR(WriteFitChunk(checkpoint / FitChunkFileName(job->c),
+                                            chunk.first_texel, options.lobes, job->results));
       pass->checkpoint_seconds += Seconds(write_start);
     }
     ++pass->fitted_chunks;
-    progress.Advance(chunk->texel_count);
-    const uint64_t bytes = chunk->samples.size() * sizeof(BrdfSample) +
-                           chunk->offsets.size() * sizeof(uint64_t);
+    progress.Advance(chunk.texel_count);
+    const uint64_t bytes = chunk.samples.size() * sizeof(BrdfSample) +
+                           chunk.offsets.size() * sizeof(uint64_t);
     if (pass->cached_bytes + bytes <= cache_budget) {
       pass->cached_bytes += bytes;
-      pass->cached[c] = std::move(chunk).value();
+      pass->cached[job->c] = std::move(job->chunk);
     }
+    return OkStatus();
+  };
+  Fitter* fitters[2] = {fitter, nullptr};
+  size_t depth = second ? 2 : 1;
+  read_ahead();
+  for (size_t k = 0; k < todo.size(); ++k) {
+    const uint32_t c = todo[k];
+    const auto read_start = std::chrono::steady_clock::now();
+    StatusOr<TexelSampleChunk> chunk = ahead.front().get();
+    ahead.pop_front();
+    pass->read_seconds += Seconds(read_start);
+    if (!chunk.ok()) return chunk.status();
+    read_ahead();
+    if (uint64_t(chunk->first_texel) + chunk->texel_count > info.texels) {
+      return DataLossError(store.ChunkPath(c).string(), ": texels ", chunk->first_texel, "..",
+                           chunk->first_texel + chunk->texel_count, " beyond the store's ",
+                           info.texels);
+    }
+    if (k == 1 && depth == 2) {
+      fitters[1] = second();
+      if (fitters[1] == nullptr) depth = 1;
+    }
+    // Job k runs on fitter k mod depth: that fitter's previous job (k - depth) is complete.
+    while (running.size() >= depth) REFLCAP_RETURN_IF_ERROR(complete_oldest());
+    auto job = std::make_unique<Job>();
+    job->c = c;
+    job->chunk = std::move(chunk).value();
+    Fitter* f = fitters[k % depth];
+    Job* j = job.get();
+    // One in flight: fitted on this thread when completed, right below (as before there were
+    // two); two: on a thread of its own while this one reads and completes the other.
+    job->done = std::async(depth == 1 ? std::launch::deferred : std::launch::async,
+                           [&fit_job, f, j] { return fit_job(f, j); });
+    running.push_back(std::move(job));
+    if (depth == 1) REFLCAP_RETURN_IF_ERROR(complete_oldest());
   }
+  while (!running.empty()) REFLCAP_RETURN_IF_ERROR(complete_oldest());
+  pass->chunks_in_flight = uint32_t(std::min(depth, std::max<size_t>(todo.size(), 1)));
   progress.Finish();
   return OkStatus();
 }
@@ -708,11 +761,13 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   for (auto it = extra.begin(); it != extra.end(); ++it) report[it.key()] = it.value();
   if (used_vulkan) {
     // Where the Vulkan fitter's time went (wall-clock seconds summed over chunks; the device's
-    // batches overlap the host's preparation and post-processing).
+    // batches overlap the host's preparation and post-processing, and with two chunks in
+    // flight the two chunks' times overlap too).
     report["vulkan"] = {{"kernel", VulkanFitKernelName(vulkan_stats.kernel)},
                         {"cluster_size", vulkan_stats.cluster_size},
                         {"native_math", vulkan_stats.native_math},
                         {"records_mapped", vulkan_stats.records_mapped},
+                        {"chunks_in_flight", pass->chunks_in_flight},
                         {"batches", vulkan_stats.batches},
                         {"dispatches", vulkan_stats.dispatches},
                         {"device_problems", vulkan_stats.gpu_problems},
@@ -807,12 +862,43 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
     pass.cached.resize(info.chunks);
   }
   const std::string device = fitter->device();
+  // VulkanFitterOptions::chunks_in_flight: a second fitter on the same device (its creation, a
+  // Vulkan device and pipelines, overlaps the first chunk's fit). Should it fail, the chunks
+  // are fitted one after another on the first.
+  std::future<StatusOr<std::unique_ptr<Fitter>>> second_pending;
+  if (const auto* vk = dynamic_cast<const VulkanFitter*>(fitter.get());
+      vk != nullptr && range.end - range.begin >= 2) {
+    const uint32_t depth = vulkan.chunks_in_flight > 0 ? vulkan.chunks_in_flight
+                           : vk->software_device()     ? 1
+                                                       : 2;
+    if (depth == 2) {
+      second_pending = std::async(std::launch::async, [backend, &options, &vulkan] {
+        return CreateFitter(backend, options.threads, vulkan);
+      });
+    }
+  }
+  std::unique_ptr<Fitter> second;
+  const auto second_fitter = [&]() -> Fitter* {
+    StatusOr<std::unique_ptr<Fitter>> made = second_pending.get();
+    if (!made.ok()) {
+      REFLCAP_LOG(kWarning) << "fit: no second Vulkan fitter (" << made.status().ToString()
+                            << "); fitting one chunk at a time";
+      return nullptr;
+    }
+    second = std::move(made).value();
+    return second.get();
+  };
   pass.setup_seconds = Seconds(start);
-  REFLCAP_RETURN_IF_ERROR(
-      FitChunks(*store, range, fitter.get(), options, checkpoint, control.resume, &pass));
-  // The fitter's per-worker workspaces and the chunk results are sized by the largest chunk;
+  REFLCAP_RETURN_IF_ERROR(FitChunks(*store, range, fitter.get(),
+                                    second_pending.valid() ? second_fitter
+                                                           : std::function<Fitter*()>(),
+                                    options, checkpoint, control.resume, &pass));
+  // The fitters' per-worker workspaces and the chunk results are sized by the largest chunk;
   // nothing needs them past the fit.
   const auto release_start = std::chrono::steady_clock::now();
+  if (second_pending.valid()) second_pending.wait();  // not needed: fewer than two chunks fitted
+  second_pending = {};
+  second.reset();
   fitter.reset();
   ReleaseFreeHeap();
   pass.release_seconds = Seconds(release_start);

@@ -93,6 +93,12 @@ struct VulkanFitterOptions {
   VulkanFitKernel kernel = VulkanFitKernel::kAuto;
   uint32_t cluster_size = 0;
   NativeMath native_math = NativeMath::kAuto;
+  // `reflcap fit`'s chunks in flight (`--vulkan-chunks-in-flight`; fit_driver.h RunFit): 2 runs a
+  // second fitter on the same device, so that one chunk's LM runs while the host prepares or
+  // finishes the other (a store chunk is one batch: within a chunk nothing overlaps); 1 fits
+  // one chunk after another. 0 = automatic: 2 on a GPU, 1 on a CPU device (lavapipe, whose
+  // "device" is the host's own cores). Results are the same either way.
+  uint32_t chunks_in_flight = 0;
 
   Status Validate() const;
 };

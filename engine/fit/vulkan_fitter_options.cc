@@ -10,6 +10,10 @@ Status VulkanFitterOptions::Validate() const {
     return InvalidArgumentError("Vulkan fitter: cluster size must be 0 (automatic) or a power of "
                                 "two up to ", kMaxVulkanFitClusterSize, ", got ", cluster_size);
   }
+  if (chunks_in_flight > 2) {
+    return InvalidArgumentError("Vulkan fitter: chunks in flight must be 0 (automatic), 1 or 2, "
+                                "got ", chunks_in_flight);
+  }
   return OkStatus();
 }
 

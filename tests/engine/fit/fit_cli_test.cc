@@ -261,6 +261,49 @@ TEST(FitCli, VulkanBackendMatchesTheCpuBackend) {
   EXPECT_NE(missing.exit_code, 0);
   EXPECT_NE(missing.err.find("no-such-gpu"), std::string::npos) << missing.err;
 }
+
+// --vulkan-chunks-in-flight 2 fits two of the store's three chunks at once, each on its own
+// fitter (auto on a GPU; lavapipe's default is 1): the maps are the same bytes as one chunk
+// after another, with the per-texel model choice too (two fits of every chunk).
+TEST(FitCli, TwoChunksInFlightWriteTheSameMaps) {
+  reflcap::testing::ScratchDir dir;
+  WriteStore(dir / "samples");
+  const std::string samples = (dir / "samples").string();
+  for (const std::string model : {"aniso", "auto"}) {
+    std::string outs[2];
+    for (int depth = 1; depth <= 2; ++depth) {
+      outs[depth - 1] = (dir / (model + std::to_string(depth))).string();
+      const CliResult r = RunCli("fit " + samples + " --out " + outs[depth - 1] +
+                                     " --backend vulkan --lobe-model " + model +
+                                     " --vulkan-chunks-in-flight " + std::to_string(depth),
+                                 dir);
+      if (r.exit_code == 3 && r.err.find("no Vulkan driver") != std::string::npos) {
+        GTEST_SKIP() << "no Vulkan driver or device on this machine: " << r.err;
+      }
+      ASSERT_EQ(r.exit_code, 0) << r.err;
+    }
+    for (const char* map : {"params.exr", "sigma.exr", "status.exr"}) {
+      const auto a = ReadTextFile(fs::path(outs[0]) / map), b = ReadTextFile(fs::path(outs[1]) / map);
+      ASSERT_TRUE(a.ok() && b.ok()) << map;
+      EXPECT_TRUE(*a == *b) << model << ": " << map << " differs between 1 and 2 chunks in flight";
+    }
+    const Json one = Json::parse(ReadTextFile(fs::path(outs[0]) / "fit_report.json").value());
+    const Json two = Json::parse(ReadTextFile(fs::path(outs[1]) / "fit_report.json").value());
+    EXPECT_EQ(one["status_counts"], two["status_counts"]);
+    EXPECT_EQ(one["vulkan"]["device_problems"], two["vulkan"]["device_problems"]);
+    EXPECT_EQ(one["vulkan"]["chunks_in_flight"], 1);
+    EXPECT_EQ(two["vulkan"]["chunks_in_flight"], 2);
+    if (model == "auto") {
+      EXPECT_EQ(one["lobe_model_choice"], two["lobe_model_choice"]);
+    }
+  }
+  // Only 0, 1 or 2: a usage error otherwise.
+  const CliResult bad = RunCli("fit " + samples + " --out " + (dir / "bad").string() +
+                                   " --backend vulkan --vulkan-chunks-in-flight 3", dir);
+  EXPECT_EQ(bad.exit_code, 1) << bad.err;
+  EXPECT_NE(bad.err.find("--vulkan-chunks-in-flight"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(dir / "bad"));
+}
 #endif  // REFLCAP_HAVE_VULKAN_FITTER
 
 }  // namespace
