@@ -291,6 +291,11 @@ StatusOr<TexelAtlas> StoreAtlas(const fs::path& samples, const SampleStoreInfo& 
 }
 
 uint32_t ChunkFirstTexel(const SampleStoreInfo& info, uint32_t c) { return c * info.chunk_texels; }
+// Memory a decoded chunk holds (what the sample cache counts against its budget).
+uint64_t DecodedBytes(const TexelSampleChunk& chunk) {
+  return chunk.samples.size() * sizeof(BrdfSample) + chunk.offsets.size() * sizeof(uint64_t);
+}
+
 uint32_t ChunkTexelCount(const SampleStoreInfo& info, uint32_t c) {
   return uint32_t(std::min<uint64_t>(info.chunk_texels, uint64_t(info.texels) - ChunkFirstTexel(info, c)));
 }
@@ -422,8 +427,7 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
     }
     ++pass->fitted_chunks;
     progress.Advance(chunk.texel_count);
-    const uint64_t bytes = chunk.samples.size() * sizeof(BrdfSample) +
-                           chunk.offsets.size() * sizeof(uint64_t);
+    const uint64_t bytes = DecodedBytes(chunk);
     if (pass->cached_bytes + bytes <= cache_budget) {
       pass->cached_bytes += bytes;
       pass->cached[job->c] = std::move(job->chunk);
@@ -577,8 +581,7 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
       // A chunk read here (the fit pass did not keep it: a merge, or a resumed chunk) is kept for
       // the later rounds and the clusters while the budget allows, as the fit pass keeps its own.
       if (loaded.ok()) {
-        const uint64_t bytes = loaded->samples.size() * sizeof(BrdfSample) +
-                               loaded->offsets.size() * sizeof(uint64_t);
+        const uint64_t bytes = DecodedBytes(*loaded);
         if (pass->cached_bytes + bytes <= cache_budget) {
           pass->cached_bytes += bytes;
           cached[c] = std::move(loaded).value();
@@ -896,8 +899,7 @@ StatusOr<FitRunSummary> RunFit(const fs::path& samples, const fs::path& out, Bac
   // The fitters' per-worker workspaces and the chunk results are sized by the largest chunk;
   // nothing needs them past the fit.
   const auto release_start = std::chrono::steady_clock::now();
-  if (second_pending.valid()) second_pending.wait();  // not needed: fewer than two chunks fitted
-  second_pending = {};
+  second_pending = {};  // a second fitter never asked for (< 2 chunks fitted): awaited, released
   second.reset();
   fitter.reset();
   ReleaseFreeHeap();
@@ -1036,8 +1038,7 @@ StatusOr<FitRunSummary> MergeFitParts(const std::vector<fs::path>& parts, const 
             for (int64_t c = b; c < e && !stop_prefetch; ++c) {
               StatusOr<TexelSampleChunk> chunk = store->ReadChunk(uint32_t(c));
               if (!chunk.ok()) continue;
-              const uint64_t size = chunk->samples.size() * sizeof(BrdfSample) +
-                                    chunk->offsets.size() * sizeof(uint64_t);
+              const uint64_t size = DecodedBytes(*chunk);
               if (bytes.fetch_add(size) + size > budget) {  // over budget: not kept
                 bytes -= size;
                 continue;
