@@ -79,7 +79,10 @@ cols = (("4", "/tmp/fit_t4"), ("8", "/tmp/fit_t8"), ("16", "/tmp/fit_vulkan"),
 rows = {}
 for name, d in cols:
     try:
-        rows[name] = json.load(open(d + "/fit_report.json"))["timings_s"]
+        report = json.load(open(d + "/fit_report.json"))
+        rows[name] = dict(report["timings_s"])
+        # Batches of the clusters' k-fold refits (a count, not seconds).
+        rows[name]["kfold_batches"] = report["clusters"].get("kfold_batches", float("nan"))
     except OSError:
         rows[name] = {}
 print(f"{'stage':26s}" + "".join(f" {n:>8s}" for n, _ in cols))

@@ -119,6 +119,7 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
     std::vector<Sums> sums, current;
     TexelResiduals residuals;
     std::vector<std::array<double, kN>> bases;
+    size_t task_candidates = 0;  // added once a task: one shared atomic per texel contends
     for (int64_t ii = begin; ii < end; ++ii) {
       const uint32_t i = uint32_t(ii);
       const size_t t = size_t(chunk.first_texel) + i;
@@ -159,7 +160,7 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       }
       // Every fold must hold samples, so that every candidate is scored on each.
       if (std::count(held.begin(), held.begin() + folds, true) != folds) continue;
-      ++candidates;
+      ++task_candidates;
       // Totals over the folds, per exponent and channel.
       std::array<Sums, kN * brdf::kChannels> total{};
       for (int f = 0; f < folds; ++f) {
@@ -237,6 +238,7 @@ void ApplyDiffuseFalloff(const TexelSampleChunk& chunk, const FitOptions& option
       replaced += borrowed;
       ++by_exponent[size_t(best)];
     }
+    candidates += task_candidates;
   }, options.threads);
   stats->candidates += candidates;
   stats->taken += taken;

@@ -390,6 +390,8 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
   // 16 recipients per task: each tests up to kMaxTransferCandidates lobes on all its samples.
   ParallelFor(row_begin, row_end, 16, [&](int64_t begin, int64_t stop, int) {
     TexelResiduals residuals;
+    // Counted per task, added once: a shared atomic per recipient contends on many threads.
+    size_t task_rejected = 0, task_transferred = 0;
     for (int64_t row = begin; row < stop; ++row) {
       const size_t t = rec[size_t(row)];
       const uint32_t i = uint32_t(t - first);
@@ -417,7 +419,7 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
         }
       }
       if (best < 0) {
-        ++rejected;
+        ++task_rejected;
         continue;
       }
       TexelFit f = fits->Get(t);
@@ -428,8 +430,10 @@ void ApplyLobeTransfer(const TexelSampleChunk& chunk, const LobeCandidates& cand
       fits->Set(t, f);
       fits->set_donor(t, best);
       if (borrowed) (*borrowed)[t] = 1;
-      ++transferred;
+      ++task_transferred;
     }
+    rejected += task_rejected;
+    transferred += task_transferred;
   }, threads);
   stats->rejected += rejected;
   stats->transferred += transferred;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <mutex>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -107,9 +108,14 @@ double SumSquares(const std::vector<Feature>& f, const std::vector<uint32_t>& it
   return sse;
 }
 
+// Items per task of the split's per-item passes (the sums stay serial, in item order: the
+// clusters do not depend on the thread count).
+constexpr int64_t kItemsPerTask = 16384;
+
 // Splits `items` in two by 2-means from the principal axis; false when a side would be empty.
+// The sides are assigned on `threads` threads (0: all).
 bool Split(const std::vector<Feature>& f, const std::vector<uint32_t>& items,
-           std::vector<uint32_t>* a, std::vector<uint32_t>* b) {
+           std::vector<uint32_t>* a, std::vector<uint32_t>* b, int threads) {
   Feature mean = Feature::Zero();
   for (uint32_t i : items) mean += f[i];
   mean /= double(items.size());
@@ -118,7 +124,11 @@ bool Split(const std::vector<Feature>& f, const std::vector<uint32_t>& items,
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
   const Feature axis = eig.eigenvectors().col(2);  // largest eigenvalue last
   std::vector<uint8_t> side(items.size());
-  for (size_t k = 0; k < items.size(); ++k) side[k] = (f[items[k]] - mean).dot(axis) > 0;
+  ParallelFor(0, int64_t(items.size()), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
+    for (int64_t k = begin; k < end; ++k) {
+      side[size_t(k)] = (f[items[size_t(k)]] - mean).dot(axis) > 0;
+    }
+  }, threads);
   for (int it = 0; it < kLloydIterations; ++it) {
     Feature m[2] = {Feature::Zero(), Feature::Zero()};
     size_t n[2] = {0, 0};
@@ -129,12 +139,17 @@ bool Split(const std::vector<Feature>& f, const std::vector<uint32_t>& items,
     if (n[0] == 0 || n[1] == 0) return false;
     m[0] /= double(n[0]);
     m[1] /= double(n[1]);
-    bool changed = false;
-    for (size_t k = 0; k < items.size(); ++k) {
-      const uint8_t s = (f[items[k]] - m[1]).squaredNorm() < (f[items[k]] - m[0]).squaredNorm();
-      changed = changed || s != side[k];
-      side[k] = s;
-    }
+    std::atomic<bool> changed{false};
+    ParallelFor(0, int64_t(items.size()), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
+      bool task_changed = false;
+      for (int64_t k = begin; k < end; ++k) {
+        const Feature& x = f[items[size_t(k)]];
+        const uint8_t s = (x - m[1]).squaredNorm() < (x - m[0]).squaredNorm();
+        task_changed = task_changed || s != side[size_t(k)];
+        side[size_t(k)] = s;
+      }
+      if (task_changed) changed = true;
+    }, threads);
     if (!changed) break;
   }
   a->clear();
@@ -159,18 +174,21 @@ bool MaterialClusters::KeptIn(uint64_t first, uint64_t end) const {
 }
 
 MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClusterOptions& options,
-                                       MaterialClusterStats* stats) {
+                                       MaterialClusterStats* stats, int threads) {
   MaterialClusters out;
   out.cluster_of.assign(fits.size(), -1);
   if (!options.enabled || fits.lobes() == 0) return out;
   std::vector<uint32_t> texel;  // feature index -> texel
-  std::vector<Feature> f;
   for (size_t t = 0; t < fits.size(); ++t) {
-    if (fits.samples(t) < kMinTransferSamples) continue;
-    texel.push_back(uint32_t(t));
-    f.push_back(AlbedoFeature(fits.params(t), options));
+    if (fits.samples(t) >= kMinTransferSamples) texel.push_back(uint32_t(t));
   }
   if (texel.empty()) return out;
+  std::vector<Feature> f(texel.size());
+  ParallelFor(0, int64_t(texel.size()), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
+    for (int64_t i = begin; i < end; ++i) {
+      f[size_t(i)] = AlbedoFeature(fits.params(texel[size_t(i)]), options);
+    }
+  }, threads);
 
   // Bisecting 2-means: split the node with the largest spread while its mean squared spread
   // exceeds 1 unit^2 and both halves keep min_cluster_texels.
@@ -189,7 +207,7 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
     }
     if (pick < 0) break;
     Node& node = nodes[size_t(pick)];
-    if (!Split(f, node.items, &a, &b) || a.size() < min_size || b.size() < min_size) {
+    if (!Split(f, node.items, &a, &b, threads) || a.size() < min_size || b.size() < min_size) {
       node.final = true;
       continue;
     }
@@ -250,31 +268,38 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
 
 void AssignSparseTexels(const FitStore& fits, const std::vector<uint8_t>& albedo_filled,
                         const MaterialClusterOptions& options, MaterialClusters* clusters,
-                        MaterialClusterStats* stats) {
+                        MaterialClusterStats* stats, int threads) {
   if (clusters->count == 0) return;
   REFLCAP_CHECK(albedo_filled.empty() || albedo_filled.size() == fits.size());
-  for (size_t t = 0; t < fits.size(); ++t) {
-    const int samples = fits.samples(t);
-    const bool filled = !albedo_filled.empty() && albedo_filled[t];
-    if (clusters->cluster_of[t] >= 0 || samples >= kMinTransferSamples ||
-        (samples == 0 && !filled)) {
-      continue;
-    }
-    const Feature x = AlbedoFeature(fits.params(t), options);
-    int best = -1;
-    double best_d2 = kSparseAssignRadius * kSparseAssignRadius;
-    for (int k = 0; k < clusters->count; ++k) {
-      const auto& c = clusters->centroid[size_t(k)];
-      const double d2 = (x - Feature(c[0], c[1], c[2])).squaredNorm();
-      if (d2 <= best_d2) {
-        best_d2 = d2;
-        best = k;
+  std::atomic<size_t> assigned{0};
+  ParallelFor(0, int64_t(fits.size()), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
+    size_t task_assigned = 0;
+    for (int64_t tt = begin; tt < end; ++tt) {
+      const size_t t = size_t(tt);
+      const int samples = fits.samples(t);
+      const bool filled = !albedo_filled.empty() && albedo_filled[t];
+      if (clusters->cluster_of[t] >= 0 || samples >= kMinTransferSamples ||
+          (samples == 0 && !filled)) {
+        continue;
       }
+      const Feature x = AlbedoFeature(fits.params(t), options);
+      int best = -1;
+      double best_d2 = kSparseAssignRadius * kSparseAssignRadius;
+      for (int k = 0; k < clusters->count; ++k) {
+        const auto& c = clusters->centroid[size_t(k)];
+        const double d2 = (x - Feature(c[0], c[1], c[2])).squaredNorm();
+        if (d2 <= best_d2) {
+          best_d2 = d2;
+          best = k;
+        }
+      }
+      if (best < 0) continue;
+      clusters->cluster_of[t] = best;
+      ++task_assigned;
     }
-    if (best < 0) continue;
-    clusters->cluster_of[t] = best;
-    ++stats->sparse_assigned;
-  }
+    assigned += task_assigned;
+  }, threads);
+  stats->sparse_assigned += assigned;
 }
 
 void StashClusterSamples(const TexelSampleChunk& chunk, double min_cos_theta,
@@ -643,118 +668,184 @@ double FoldHeldOutCost(TexelResiduals* r, const brdf::BrdfParams& fit, int f) {
 
 }  // namespace
 
+KFoldScores::KFoldScores(size_t texels, const FitOptions& options, uint64_t batch_samples)
+    : folds_(options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0),
+      batch_samples_(std::max<uint64_t>(batch_samples, 1)) {
+  if (folds_ == 0) return;
+  best_cv_.assign(texels, std::numeric_limits<double>::infinity());
+  best_lobe_.assign(texels, -1);
+  own_cv_.assign(texels, 0.0);
+  waiting_samples_.offsets.assign(1, 0);
+}
+
+void ScoreClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, const FitStore& fits, KFoldScores* scores,
+                       MaterialClusterStats* stats) {
+  const int folds = scores->folds_;
+  if (folds == 0) return;
+  REFLCAP_CHECK(chunk.texel_count == 0 ||
+                uint64_t(chunk.first_texel) + chunk.texel_count <= scores->best_cv_.size());
+  REFLCAP_CHECK(scores->waiting_.empty() || scores->waiting_.back() < chunk.first_texel)
+      << "chunks must be scored in ascending order";
+  // The cluster lobes' scores first (in parallel), and which texels need the refits.
+  std::vector<uint8_t> needs_refit(chunk.texel_count, 0);
+  ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
+    TexelResiduals residuals;
+    for (int64_t ii = begin; ii < end; ++ii) {
+      const uint32_t i = uint32_t(ii);
+      const size_t t = size_t(chunk.first_texel) + i;
+      const int32_t k = clusters.LenderOf(t);
+      // The texels that take the k-fold branch of ApplyClusterLobes: with a lobe (own or
+      // borrowed), enough samples, a cluster that kept lobes.
+      if (k < 0 || clusters.kept[size_t(k)].empty() ||
+          fits.status(t) == FitStatus::kNonFiniteInput || fits.lambert_only(t) ||
+          fits.donor(t) == FitStore::kClusterLobe || fits.samples(t) < kMinTransferSamples) {
+        continue;
+      }
+      residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
+      if (!EveryFoldHeld(residuals, folds)) continue;
+      double best = std::numeric_limits<double>::infinity();
+      const auto& kept = clusters.kept[size_t(k)];
+      for (size_t j = 0; j < kept.size(); ++j) {
+        const double cv = CrossValidatedLobeCost(&residuals, &kept[j], folds);
+        if (std::isfinite(cv) && cv < best) {
+          best = cv;
+          scores->best_lobe_[t] = int16_t(j);
+        }
+      }
+      scores->best_cv_[t] = best;
+      // An own lobe is refitted without each fold (a borrowed one is scored when applied, with
+      // its albedo re-fitted); with no kept lobe scored the own lobe stays, and needs no refit.
+      needs_refit[i] = fits.donor(t) == FitStore::kNoDonor && scores->best_lobe_[t] >= 0;
+    }
+  }, options.threads);
+  // The texels needing refits wait with a copy of their samples (the chunk may not be kept):
+  // offsets first, then the copies in parallel.
+  TexelSampleChunk& waiting = scores->waiting_samples_;
+  std::vector<uint32_t> appended;
+  for (uint32_t i = 0; i < chunk.texel_count; ++i) {
+    if (!needs_refit[i]) continue;
+    appended.push_back(i);
+    scores->waiting_.push_back(chunk.first_texel + i);
+    waiting.offsets.push_back(waiting.offsets.back() + chunk.SampleCount(i));
+  }
+  const size_t first_appended = waiting.texel_count;
+  waiting.texel_count = uint32_t(scores->waiting_.size());
+  waiting.samples.resize(waiting.offsets.back());
+  ParallelFor(0, int64_t(appended.size()), 64, [&](int64_t begin, int64_t end, int) {
+    for (int64_t j = begin; j < end; ++j) {
+      const uint32_t i = appended[size_t(j)];
+      std::copy(chunk.SamplesOf(i), chunk.SamplesOf(i) + chunk.SampleCount(i),
+                waiting.samples.data() + waiting.offsets[first_appended + size_t(j)]);
+    }
+  }, options.threads);
+  if (waiting.samples.size() >= scores->batch_samples_) {
+    RefitOwnLobes(options, scores, stats);
+  }
+}
+
+void RefitOwnLobes(const FitOptions& options, KFoldScores* scores, MaterialClusterStats* stats) {
+  const int folds = scores->folds_;
+  if (folds == 0 || scores->waiting_.empty()) return;
+  const auto refit_start = std::chrono::steady_clock::now();
+  const TexelSampleChunk& waiting = scores->waiting_samples_;
+  // Indices into waiting_: the texels still refitted.
+  std::vector<uint32_t> refit(scores->waiting_.size());
+  for (size_t j = 0; j < refit.size(); ++j) refit[j] = uint32_t(j);
+  stats->kfold_refit += refit.size();
+  ++stats->kfold_batches;
+  // Fold by fold. Each fold adds a cost >= 0 to the texel's own score, so once the sum so far
+  // exceeds the cluster lobe's score by the margin the cluster lobe wins whatever the other
+  // folds add: such texels are not refitted for them (the same choice, in ~half the refits).
+  if (scores->fitter_ == nullptr) {
+    auto fitter = CreateFitter(Backend::kCpu, options.threads);
+    REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
+    scores->fitter_ = std::move(fitter).value();
+  }
+  std::vector<TexelFit> fold_fit;
+  for (int f = 0; f < folds && !refit.empty(); ++f) {
+    // The refitted texels' samples outside fold f: counted, then copied, in parallel.
+    TexelSampleChunk& train = scores->train_;  // its buffers reused: no fresh pages per fold
+    train.first_texel = 0;
+    train.texel_count = uint32_t(refit.size());
+    train.offsets.assign(refit.size() + 1, 0);
+    ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
+      for (int64_t j = begin; j < end; ++j) {
+        const uint32_t i = refit[size_t(j)];
+        const BrdfSample* samples = waiting.SamplesOf(i);
+        uint64_t n = 0;
+        for (size_t s = 0; s < waiting.SampleCount(i); ++s) n += FoldOf(samples[s], folds) != f;
+        train.offsets[size_t(j) + 1] = n;
+      }
+    }, options.threads);
+    for (size_t j = 0; j < refit.size(); ++j) train.offsets[j + 1] += train.offsets[j];
+    train.samples.resize(train.offsets.back());
+    ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
+      for (int64_t j = begin; j < end; ++j) {
+        const uint32_t i = refit[size_t(j)];
+        const BrdfSample* samples = waiting.SamplesOf(i);
+        BrdfSample* out = train.samples.data() + train.offsets[size_t(j)];
+        for (size_t s = 0; s < waiting.SampleCount(i); ++s) {
+          if (FoldOf(samples[s], folds) != f) *out++ = samples[s];
+        }
+      }
+    }, options.threads);
+    const Status fitted = scores->fitter_->Fit(train, options, &fold_fit);
+    REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
+    stats->kfold_refits += refit.size();
+    ParallelFor(0, int64_t(refit.size()), 64, [&](int64_t begin, int64_t end, int) {
+      TexelResiduals residuals;
+      for (int64_t j = begin; j < end; ++j) {
+        const uint32_t i = refit[size_t(j)];
+        residuals.Prepare(waiting.SamplesOf(i), waiting.SampleCount(i), options.min_cos_theta,
+                          folds);
+        scores->own_cv_[scores->waiting_[i]] +=
+            FoldHeldOutCost(&residuals, fold_fit[size_t(j)].params, f);
+      }
+    }, options.threads);
+    if (!options.clusters.stop_decided_refits) continue;
+    size_t kept_refits = 0;
+    for (uint32_t i : refit) {
+      const uint32_t t = scores->waiting_[i];
+      if (!(scores->best_cv_[t] < scores->own_cv_[t] - kKFoldMargin)) refit[kept_refits++] = i;
+    }
+    refit.resize(kept_refits);
+  }
+  // Emptied, their buffers kept for the next batch.
+  scores->waiting_.clear();
+  scores->waiting_samples_.samples.clear();
+  scores->waiting_samples_.offsets.assign(1, 0);
+  scores->waiting_samples_.texel_count = 0;
+  stats->refit_seconds +=
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - refit_start).count();
+}
+
 void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
                        const FitOptions& options, FitStore* fits, MaterialClusterStats* stats) {
+  KFoldScores scores(fits->size(), options);
+  ScoreClusterLobes(chunk, clusters, options, *fits, &scores, stats);
+  RefitOwnLobes(options, &scores, stats);
+  ApplyClusterLobes(chunk, clusters, options, scores, fits, stats);
+}
+
+void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, const KFoldScores& scores, FitStore* fits,
+                       MaterialClusterStats* stats) {
   const double max_increase = options.lobe_transfer.max_cost_increase;
   const int own_params = NumParams(options.lobe_model, fits->lobes()) *
                          ProblemsPerTexel(options.lobe_model);
-  std::atomic<size_t> recipients{0}, no_lobe{0}, rejected{0}, transferred{0}, replaced{0};
-  std::atomic<size_t> sparse_lent{0}, foreign_lent{0};
-  const int folds =
-      options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0;
-  // k-fold: the texels with a lobe of their own that a cluster offers lobes to are fitted again
-  // without each fold (the CPU batched fitter, whatever backend made the fit: every backend then
-  // gets the same choice from the same fits).
-  // Per texel that takes the k-fold branch below: the best kept lobe's held-out cost and its
-  // index in kept[k] (-1: none scored), and for an own lobe its own held-out cost (refitted).
-  std::vector<double> best_cv(folds > 0 ? chunk.texel_count : 0);
-  std::vector<int16_t> best_lobe(folds > 0 ? chunk.texel_count : 0, -1);
-  std::vector<double> own_cv(folds > 0 ? chunk.texel_count : 0);
-  if (folds > 0) {
-    // The cluster lobes' scores first (in parallel), and which texels need the refits.
-    std::vector<uint8_t> needs_refit(chunk.texel_count, 0);
-    ParallelFor(0, int64_t(chunk.texel_count), 64, [&](int64_t begin, int64_t end, int) {
-      TexelResiduals residuals;
-      for (int64_t ii = begin; ii < end; ++ii) {
-        const uint32_t i = uint32_t(ii);
-        const size_t t = size_t(chunk.first_texel) + i;
-        const int32_t k = clusters.LenderOf(t);
-        // The texels that take the k-fold branch of the pass below: with a lobe (own or
-        // borrowed), enough samples, a cluster that kept lobes.
-        if (k < 0 || clusters.kept[size_t(k)].empty() ||
-            fits->status(t) == FitStatus::kNonFiniteInput || fits->lambert_only(t) ||
-            fits->donor(t) == FitStore::kClusterLobe || fits->samples(t) < kMinTransferSamples) {
-          continue;
-        }
-        residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
-        if (!EveryFoldHeld(residuals, folds)) continue;
-        double best = std::numeric_limits<double>::infinity();
-        const auto& kept = clusters.kept[size_t(k)];
-        for (size_t j = 0; j < kept.size(); ++j) {
-          const double cv = CrossValidatedLobeCost(&residuals, &kept[j], folds);
-          if (std::isfinite(cv) && cv < best) {
-            best = cv;
-            best_lobe[i] = int16_t(j);
-          }
-        }
-        best_cv[i] = best;
-        // An own lobe is refitted without each fold (a borrowed one is scored below with its
-        // albedo re-fitted); with no kept lobe scored the own lobe stays, and needs no refit.
-        needs_refit[i] = fits->donor(t) == FitStore::kNoDonor && best_lobe[i] >= 0;
-      }
-    }, options.threads);
-    std::vector<uint32_t> refit;
-    for (uint32_t i = 0; i < chunk.texel_count; ++i) {
-      if (needs_refit[i]) refit.push_back(i);
-    }
-    stats->kfold_refit += refit.size();
-    if (!refit.empty()) {
-      // Fold by fold. Each fold adds a cost >= 0 to the texel's own score, so once the sum so far
-      // exceeds the cluster lobe's score by the margin the cluster lobe wins whatever the other
-      // folds add: such texels are not refitted for them (the same choice, in ~half the refits).
-      const auto refit_start = std::chrono::steady_clock::now();
-      auto fitter = CreateFitter(Backend::kCpu, options.threads);
-      REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
-      std::vector<TexelFit> fold_fit;
-      for (int f = 0; f < folds && !refit.empty(); ++f) {
-        // The refitted texels' samples outside fold f: counted, then copied, in parallel.
-        TexelSampleChunk train;
-        train.first_texel = 0;
-        train.texel_count = uint32_t(refit.size());
-        train.offsets.assign(refit.size() + 1, 0);
-        ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
-          for (int64_t j = begin; j < end; ++j) {
-            const uint32_t i = refit[size_t(j)];
-            const BrdfSample* samples = chunk.SamplesOf(i);
-            uint64_t n = 0;
-            for (size_t s = 0; s < chunk.SampleCount(i); ++s) n += FoldOf(samples[s], folds) != f;
-            train.offsets[size_t(j) + 1] = n;
-          }
-        }, options.threads);
-        for (size_t j = 0; j < refit.size(); ++j) train.offsets[j + 1] += train.offsets[j];
-        train.samples.resize(train.offsets.back());
-        ParallelFor(0, int64_t(refit.size()), 256, [&](int64_t begin, int64_t end, int) {
-          for (int64_t j = begin; j < end; ++j) {
-            const uint32_t i = refit[size_t(j)];
-            const BrdfSample* samples = chunk.SamplesOf(i);
-            BrdfSample* out = train.samples.data() + train.offsets[size_t(j)];
-            for (size_t s = 0; s < chunk.SampleCount(i); ++s) {
-              if (FoldOf(samples[s], folds) != f) *out++ = samples[s];
-            }
-          }
-        }, options.threads);
-        const Status fitted = (*fitter)->Fit(train, options, &fold_fit);
-        REFLCAP_CHECK(fitted.ok()) << fitted.ToString();  // options were validated by the caller
-        stats->kfold_refits += refit.size();
-        ParallelFor(0, int64_t(refit.size()), 64, [&](int64_t begin, int64_t end, int) {
-          TexelResiduals residuals;
-          for (int64_t j = begin; j < end; ++j) {
-            const uint32_t i = refit[size_t(j)];
-            residuals.Prepare(chunk.SamplesOf(i), chunk.SampleCount(i), options.min_cos_theta, folds);
-            own_cv[i] += FoldHeldOutCost(&residuals, fold_fit[size_t(j)].params, f);
-          }
-        }, options.threads);
-        if (!options.clusters.stop_decided_refits) continue;
-        size_t kept_refits = 0;
-        for (uint32_t i : refit) {
-          if (!(best_cv[i] < own_cv[i] - kKFoldMargin)) refit[kept_refits++] = i;
-        }
-        refit.resize(kept_refits);
-      }
-      stats->refit_seconds +=
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - refit_start).count();
-    }
-  }
+  // Counted per task, summed once a task: an atomic add per texel on one shared line costs more
+  // than the texel's test on a 16-core host.
+  struct Counts {
+    size_t recipients = 0, no_lobe = 0, rejected = 0, transferred = 0, replaced = 0;
+    size_t sparse_lent = 0, foreign_lent = 0;
+  };
+  Counts total;
+  std::mutex total_mutex;
+  const int folds = scores.folds_;
+  REFLCAP_CHECK(scores.waiting_.empty()) << "RefitOwnLobes before ApplyClusterLobes";
+  REFLCAP_CHECK(folds == 0 || chunk.texel_count == 0 ||
+                uint64_t(chunk.first_texel) + chunk.texel_count <= scores.best_cv_.size());
   // Every cluster's kept lobes, with their cluster: the foreign offers below.
   std::vector<std::pair<int32_t, const brdf::BrdfParams*>> all_kept;
   for (size_t j = 0; j < clusters.kept.size(); ++j) {
@@ -763,6 +854,10 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
     TexelResiduals prepared;
+    Counts n;
+    size_t &recipients = n.recipients, &no_lobe = n.no_lobe, &rejected = n.rejected,
+           &transferred = n.transferred, &replaced = n.replaced, &sparse_lent = n.sparse_lent,
+           &foreign_lent = n.foreign_lent;
     for (int64_t i = begin; i < end; ++i) {
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
@@ -804,16 +899,16 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       if (folds > 0 && !lambert_only && EveryFoldHeld(prepared, folds)) {
         // A texel with a lobe: the cluster's lobe replaces it when it predicts the texel's
         // held-out photographs better (k-fold), the texel's own lobe fitted without each fold.
-        if (best_lobe[size_t(i)] < 0) continue;  // no kept lobe scored: the lobe stays
-        const brdf::BrdfParams* best = &clusters.kept[size_t(k)][size_t(best_lobe[size_t(i)])];
+        if (scores.best_lobe_[t] < 0) continue;  // no kept lobe scored: the lobe stays
+        const brdf::BrdfParams* best = &clusters.kept[size_t(k)][size_t(scores.best_lobe_[t])];
         // An own lobe's score comes from the refits above; a neighbour's lobe was not fitted to
         // these samples, so only its albedo is re-fitted per fold.
         const double own_score =
             fits->donor(t) == FitStore::kNoDonor
-                ? own_cv[size_t(i)]
+                ? scores.own_cv_[t]
                 : CrossValidatedLobeCost(&prepared, &fit.params, folds);
         // Ties (both predictions exact to rounding) keep the texel's own measurement.
-        if (!(best_cv[size_t(i)] < own_score - kKFoldMargin)) continue;
+        if (!(scores.best_cv_[t] < own_score - kKFoldMargin)) continue;
         const double cost = RefitAlbedoCost(&prepared, best, &rho);
         fit.params.lobes = best->lobes;
         fit.params.rho_d = rho;
@@ -883,14 +978,22 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         (lambert_only ? transferred : replaced) += 1;
       }
     }
+    const std::lock_guard<std::mutex> lock(total_mutex);
+    total.recipients += recipients;
+    total.no_lobe += no_lobe;
+    total.rejected += rejected;
+    total.transferred += transferred;
+    total.replaced += replaced;
+    total.sparse_lent += sparse_lent;
+    total.foreign_lent += foreign_lent;
   }, options.threads);
-  stats->recipients += recipients;
-  stats->no_lobe += no_lobe;
-  stats->rejected += rejected;
-  stats->transferred += transferred;
-  stats->replaced += replaced;
-  stats->sparse_lent += sparse_lent;
-  stats->foreign_lent += foreign_lent;
+  stats->recipients += total.recipients;
+  stats->no_lobe += total.no_lobe;
+  stats->rejected += total.rejected;
+  stats->transferred += total.transferred;
+  stats->replaced += total.replaced;
+  stats->sparse_lent += total.sparse_lent;
+  stats->foreign_lent += total.foreign_lent;
 }
 
 }  // namespace reflcap::fit

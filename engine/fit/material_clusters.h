@@ -49,6 +49,8 @@
 //          score is lower by more than kKFoldMargin. The refits go fold by fold and stop for a
 //          texel once its own score so far exceeds the cluster lobe's by the margin (each fold
 //          adds a cost >= 0: the same choice; on the million preset 55 % of the refits).
+//          Every chunk is scored before the refits, which batch many chunks' texels
+//          (KFoldScores): the same refits, more texels per parallel loop.
 //          Texels with some fold empty, and every
 //          texel under ModelChoice::kBic, use the Bayesian information criterion instead:
 //          2 cost + k ln N, k = 3 for the cluster lobe (the albedo only) and the texel's own
@@ -74,6 +76,7 @@
 // of the fitter), so CPU and Vulkan fits take the same lobes given the same fits.
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "engine/brdf/lafortune.h"
@@ -119,6 +122,7 @@ struct MaterialClusterStats {
   size_t foreign_lent = 0;      // recipients that took another cluster's lobe (misfit own)
   size_t kfold_refit = 0;       // texels with an own lobe refitted without some fold
   size_t kfold_refits = 0;      // the refits (a texel and a fold each; at most folds per texel)
+  size_t kfold_batches = 0;     // batches the refits ran in (KFoldScores)
   double refit_seconds = 0;     // ApplyClusterLobes' k-fold refits of texels with own lobes
 };
 
@@ -160,8 +164,9 @@ int PhotographFold(uint32_t image, int folds);
 
 // Step 1 (and the candidates of step 3). Empty (count 0) when options.enabled is false or the
 // fit has no lobes.
+// Per-texel passes on `threads` threads (0: all); the result does not depend on it.
 MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClusterOptions& options,
-                                       MaterialClusterStats* stats);
+                                       MaterialClusterStats* stats, int threads = 0);
 
 // Step 1b: texels too sparse to form clusters — 1 or 2 samples, or none but an albedo from albedo
 // fill (`albedo_filled`, one byte per texel, or empty) — join the cluster whose centroid is
@@ -169,7 +174,7 @@ MaterialClusters BuildMaterialClusters(const FitStore& fits, const MaterialClust
 // its lobe (tested on their samples when they have any).
 void AssignSparseTexels(const FitStore& fits, const std::vector<uint8_t>& albedo_filled,
                         const MaterialClusterOptions& options, MaterialClusters* clusters,
-                        MaterialClusterStats* stats);
+                        MaterialClusterStats* stats, int threads = 0);
 
 // Step 2 for the pool texels of one chunk. Chunks must come in ascending order (each pool's
 // samples are appended in texel order).
@@ -180,7 +185,62 @@ void StashClusterSamples(const TexelSampleChunk& chunk, double min_cos_theta,
 void ChooseClusterLobes(const FitOptions& options, MaterialClusters* clusters,
                         MaterialClusterStats* stats);
 
-// Step 4 for the texels of one chunk.
+// Step 4's k-fold scores (ModelChoice::kKFold) over the whole store, so that the refits of the
+// own lobes batch texels of many chunks: a chunk holds ~1,000 of them on the million preset,
+// too few for 16 threads through five folds of parallel loops (0.35 s of the fit did not shrink
+// with threads on an H200 host). Fill it chunk by chunk (ScoreClusterLobes, chunks in ascending
+// order), flush the last refits (RefitOwnLobes), then apply chunk by chunk.
+class KFoldScores {
+ public:
+  // Refits run once the waiting texels hold this many samples (52 bytes each: 27 MB, and as much
+  // again for a fold's training copy): ~8,000 texels of 64 samples, 24,000 problems for the
+  // batched fitter, enough for every thread of a 16-core host. A batch 4x larger was 0.2 s
+  // slower on 2 cores (memory traffic: every fold streams the batch 3 times).
+  static constexpr uint64_t kRefitBatchSamples = uint64_t{1} << 19;
+
+  // For `texels` texels (the store's); folds from options (0 under ModelChoice::kBic: nothing
+  // is scored and ApplyClusterLobes uses the BIC for every texel). The refits run whenever
+  // `batch_samples` samples wait (tests pass small batches).
+  KFoldScores(size_t texels, const FitOptions& options,
+              uint64_t batch_samples = kRefitBatchSamples);
+
+  int folds() const { return folds_; }
+
+ private:
+  friend void ScoreClusterLobes(const TexelSampleChunk&, const MaterialClusters&,
+                                const FitOptions&, const FitStore&, KFoldScores*,
+                                MaterialClusterStats*);
+  friend void RefitOwnLobes(const FitOptions&, KFoldScores*, MaterialClusterStats*);
+  friend void ApplyClusterLobes(const TexelSampleChunk&, const MaterialClusters&,
+                                const FitOptions&, const KFoldScores&, FitStore*,
+                                MaterialClusterStats*);
+
+  int folds_ = 0;
+  uint64_t batch_samples_ = kRefitBatchSamples;
+  // Per texel of the store (empty without folds).
+  std::vector<double> best_cv_;     // the best kept lobe's held-out cost
+  std::vector<int16_t> best_lobe_;  // its index in kept[LenderOf(t)]; -1: none scored
+  std::vector<double> own_cv_;      // an own lobe's held-out cost, refitted without each fold
+  // Texels whose own lobes wait for their refits (store indices, ascending), with their samples
+  // (waiting texel j owns waiting_samples_ texel j's).
+  std::vector<uint32_t> waiting_;
+  TexelSampleChunk waiting_samples_;
+  TexelSampleChunk train_;  // one fold's training samples; buffers kept from batch to batch
+  std::unique_ptr<Fitter> fitter_;  // the CPU batched fitter of the refits, made once
+};
+
+// Step 4, k-fold part, for the texels of one chunk: each kept lobe's held-out score, and the own
+// lobes that need refits (run here once a batch is full). Does nothing without folds.
+void ScoreClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, const FitStore& fits, KFoldScores* scores,
+                       MaterialClusterStats* stats);
+// The refits still waiting (call once every chunk is scored).
+void RefitOwnLobes(const FitOptions& options, KFoldScores* scores, MaterialClusterStats* stats);
+// Step 4 for the texels of one chunk, every chunk scored and refitted first.
+void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
+                       const FitOptions& options, const KFoldScores& scores, FitStore* fits,
+                       MaterialClusterStats* stats);
+// Step 4 for a store of this one chunk: score, refit, apply.
 void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& clusters,
                        const FitOptions& options, FitStore* fits, MaterialClusterStats* stats);
 

@@ -507,19 +507,19 @@ TEST(MaterialClusters, KFoldKeepsTheTruthAndDoesNotDependOnThreads) {
   }
 }
 
-TEST(MaterialClusters, KFoldRefitsStopOnceTheClusterLobeHasWonWithTheSameChoices) {
-  // 40 donors of the material whose samples carry 0-10 % noise (uniform, relative) and 4 donors
-  // of a much sharper lobe (n = 200, exact). Refitted without each fold, the material's own
-  // lobes predict the held-out fold worse than its lobe refined on the pooled samples and lose,
-  // most before all five folds are refitted; the sharp donors keep theirs after all five.
-  // Stopping early must not change a single choice: each further fold only adds a cost >= 0 to
-  // the own lobe's score.
+// 40 donors of the glossy material whose samples carry 0-10 % noise (uniform, relative), 4
+// donors of a much sharper lobe (n = 200, exact), 56 recipients that never saw the highlight.
+// Refitted without each fold, the material's own lobes predict the held-out fold worse than its
+// lobe refined on the pooled samples and lose, most before all five folds are refitted; the
+// sharp donors keep theirs after all five.
+void NoisyDonorsAndSharpOnes(std::vector<TexelFit>* fits_out,
+                             std::vector<std::vector<BrdfSample>>* samples_out) {
   const brdf::BrdfParams glossy = Glossy();
   brdf::BrdfParams sharp = glossy;
   for (int c = 0; c < 3; ++c) sharp.lobes[0][c] = brdf::MirrorLobe(0.5, 200);
   const double kDonorNoise[4] = {0.0, 0.01, 0.03, 0.1};
-  std::vector<TexelFit> fits;
-  std::vector<std::vector<BrdfSample>> samples;
+  std::vector<TexelFit>& fits = *fits_out;
+  std::vector<std::vector<BrdfSample>>& samples = *samples_out;
   uint32_t state = 12345;
   const auto uniform = [&state] {  // a fixed LCG: the same noise on every platform
     state = state * 1664525u + 1013904223u;
@@ -549,6 +549,14 @@ TEST(MaterialClusters, KFoldRefitsStopOnceTheClusterLobeHasWonWithTheSameChoices
     fits.push_back(t < 40 ? DonorFit(glossy) : is_sharp ? DonorFit(sharp) : RecipientFit(kGlossyAlbedo));
     samples.push_back(std::move(texel));
   }
+}
+
+TEST(MaterialClusters, KFoldRefitsStopOnceTheClusterLobeHasWonWithTheSameChoices) {
+  // Stopping early must not change a single choice: each further fold only adds a cost >= 0 to
+  // the own lobe's score.
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  NoisyDonorsAndSharpOnes(&fits, &samples);
   const TexelSampleChunk chunk = Chunk(samples);
   const auto run = [&](bool stop, FitStore* store) {
     FitOptions options;
@@ -575,6 +583,70 @@ TEST(MaterialClusters, KFoldRefitsStopOnceTheClusterLobeHasWonWithTheSameChoices
     EXPECT_EQ(stopped.donor(t), every.donor(t)) << t;
     for (int i = 0; i < stopped.ParamsPerTexel(); ++i) {
       ASSERT_EQ(stopped.params(t)[i], every.params(t)[i]) << t << " " << i;
+    }
+  }
+}
+
+TEST(MaterialClusters, KFoldRefitsBatchedOverChunksMakeThePerChunkChoices) {
+  // reflcap fit scores every store chunk first and refits the own lobes of many chunks in one
+  // batch (KFoldScores): each texel's refits see only its own samples, so the choices, the
+  // parameters and the counts must be those of refitting chunk by chunk, whether a batch is
+  // refitted after every chunk, after two, or only once every chunk is scored. Four chunks of
+  // 25 texels: the donors (60 samples each) in the first two.
+  std::vector<TexelFit> fits;
+  std::vector<std::vector<BrdfSample>> samples;
+  NoisyDonorsAndSharpOnes(&fits, &samples);
+  std::vector<TexelSampleChunk> chunks;
+  for (size_t first = 0; first < samples.size(); first += 25) {
+    TexelSampleChunk c = Chunk({samples.begin() + std::ptrdiff_t(first),
+                                samples.begin() + std::ptrdiff_t(first + 25)});
+    c.first_texel = uint32_t(first);
+    chunks.push_back(std::move(c));
+  }
+  const FitOptions options;
+  const auto clusters_of = [&](const FitStore& store, MaterialClusterStats* stats) {
+    MaterialClusters clusters = BuildMaterialClusters(store, options.clusters, stats);
+    for (const TexelSampleChunk& c : chunks) {
+      StashClusterSamples(c, options.min_cos_theta, &clusters);
+    }
+    ChooseClusterLobes(options, &clusters, stats);
+    return clusters;
+  };
+  // The reference: each chunk scored, refitted and applied before the next.
+  FitStore reference = StoreOf(fits);
+  MaterialClusterStats want;
+  {
+    const MaterialClusters clusters = clusters_of(reference, &want);
+    for (const TexelSampleChunk& c : chunks) {
+      ApplyClusterLobes(c, clusters, options, &reference, &want);
+    }
+  }
+  ASSERT_EQ(want.kfold_refit, 44u);
+  ASSERT_GT(want.replaced, 0u);
+  // 1 sample: a batch per chunk with donors; 2,000: chunks 0 and 1 together (1,500 + 1,140
+  // samples); the default: one batch at the end.
+  for (const uint64_t batch : {uint64_t{1}, uint64_t{2000}, KFoldScores::kRefitBatchSamples}) {
+    FitStore store = StoreOf(fits);
+    MaterialClusterStats got;
+    const MaterialClusters clusters = clusters_of(store, &got);
+    KFoldScores scores(store.size(), options, batch);
+    for (const TexelSampleChunk& c : chunks) {
+      ScoreClusterLobes(c, clusters, options, store, &scores, &got);
+    }
+    RefitOwnLobes(options, &scores, &got);
+    for (const TexelSampleChunk& c : chunks) {
+      ApplyClusterLobes(c, clusters, options, scores, &store, &got);
+    }
+    EXPECT_EQ(got.kfold_refit, want.kfold_refit) << batch;
+    EXPECT_EQ(got.kfold_refits, want.kfold_refits) << batch;
+    EXPECT_EQ(got.replaced, want.replaced) << batch;
+    EXPECT_EQ(got.transferred, want.transferred) << batch;
+    EXPECT_EQ(got.rejected, want.rejected) << batch;
+    for (size_t t = 0; t < fits.size(); ++t) {
+      ASSERT_EQ(store.donor(t), reference.donor(t)) << batch << " " << t;
+      for (int i = 0; i < store.ParamsPerTexel(); ++i) {
+        ASSERT_EQ(store.params(t)[i], reference.params(t)[i]) << batch << " " << t << " " << i;
+      }
     }
   }
 }
