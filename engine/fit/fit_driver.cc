@@ -393,16 +393,13 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
     }
     return OkStatus();
   };
-  // The oldest job, waited for (the wait is the pass's fit time). Its results are stored
-  // (store_job below) once the next job is on its fitter.
+  // The oldest job, waited for. Its results are stored (store_job below) once the next job is
+  // on its fitter.
   std::deque<std::unique_ptr<Job>> running;
   const auto wait_oldest = [&]() -> StatusOr<std::unique_ptr<Job>> {
     std::unique_ptr<Job> job = std::move(running.front());
     running.pop_front();
-    const auto fit_start = std::chrono::steady_clock::now();
-    const Status fitted = job->done.get();
-    pass->fit_seconds += Seconds(fit_start);
-    REFLCAP_RETURN_IF_ERROR(fitted);
+    REFLCAP_RETURN_IF_ERROR(job->done.get());
     if (job->used_vulkan) {
       const VulkanFitStats& st = job->vulkan_stats;
       VulkanFitStats& sum = pass->vulkan_stats;
@@ -446,6 +443,10 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
   };
   Fitter* fitters[2] = {fitter, nullptr};
   size_t depth = second ? 2 : 1;
+  // The pass's fit time: its wall time less its waits for chunks being read. (The waits for
+  // each fit alone would leave out the storing of results that overlaps the next fit.)
+  const auto pass_start = std::chrono::steady_clock::now();
+  const double read_before = pass->read_seconds;
   read_ahead();
   for (size_t k = 0; k < todo.size(); ++k) {
     const uint32_t c = todo[k];
@@ -486,6 +487,7 @@ Status FitChunks(const SampleStoreReader& store, ChunkRange range, Fitter* fitte
     REFLCAP_ASSIGN_OR_RETURN(std::unique_ptr<Job> done, wait_oldest());
     REFLCAP_RETURN_IF_ERROR(store_job(std::move(done)));
   }
+  pass->fit_seconds += Seconds(pass_start) - (pass->read_seconds - read_before);
   pass->chunks_in_flight = uint32_t(std::min(depth, std::max<size_t>(todo.size(), 1)));
   progress.Finish();
   return OkStatus();
