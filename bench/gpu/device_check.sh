@@ -6,7 +6,9 @@
 # prints a summary. 156 s on an H200 host at 01841b1 (tests 60 s, synth 21 s, run 35 s, fits
 # 11 s, benchmarks 23 s); 207 s at 7447d4e, with the fit at 4 and 8 threads beside 16 and 64 MiB
 # transfers over 4-32 MiB staging pieces; since then also the photographs' read and decode rates
-# (~10 s), and the render variants (183-213 s in all at bb5f5f6-b7f27cc; 197 s at ae2cc8d).
+# (~10 s), and the render variants (183-213 s in all at bb5f5f6-b7f27cc; 197 s at ae2cc8d);
+# since the sixteenth session also five render runs over flights and batch sizes (not yet timed
+# on a device: ~5 s each expected) and the clusters' k-fold batches in the fit table.
 # BM_FitTexelsVulkanStaged runs beside BM_FitTexelsVulkan: the fit's records through the staging
 # ring against mapped device memory. Record every number with the device line it prints.
 set -u
@@ -104,6 +106,21 @@ timeout 60 "$BUILD"/bench/engine/reflcap_fit_bench --benchmark_filter='BM_Prepar
 REFLCAP_BENCH_RENDER_SIZES=512 REFLCAP_BENCH_RENDER_VARIANTS=1 timeout 90 \
   "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/512/64' 2>&1 |
   grep -E "^BM_" | tee "$OUT/render_bench.txt"
+# Submissions in flight and images per submission (defaults 3 and 16). At ae2cc8d the host
+# waited 0.12 ms an image on fences and the device idled ~0.14 ms an image (0.58 ms an image
+# against 0.44 of device time): do more flights, or other batch sizes, overlap them better?
+while read -r flights images; do
+  REFLCAP_BENCH_RENDER_SIZES=512 REFLCAP_BENCH_RENDER_IN_FLIGHT=$flights \
+    REFLCAP_BENCH_RENDER_BATCH_IMAGES=$images timeout 30 \
+    "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/512/64/real_time$' 2>&1 |
+    grep -E "^BM_" | sed "s/^/in_flight $flights, batch $images: /" | tee -a "$OUT/render_bench.txt"
+done <<'CFG'
+2 16
+4 16
+6 16
+3 8
+3 32
+CFG
 REFLCAP_BENCH_RENDER_SIZES=1024 timeout 60 \
   "$BUILD"/bench/render/reflcap_render_bench --benchmark_filter='BM_RenderBatch/vulkan/1024/64' 2>&1 |
   grep -E "^BM_" | tee -a "$OUT/render_bench.txt"
