@@ -118,15 +118,27 @@ TexelModel TexelModelOf(const FitStore& fits, size_t t) {
                                                  : TexelModel::kLambertNoEvidence;
 }
 
-// Work per ParallelFor task while the maps are filled: large enough that a task's hand-over is
-// negligible, small enough to balance (a million-texel atlas is ~1,300 rows).
 // Sample-store chunks a fit pass reads ahead of the one it fits. One was too few on a 16-core
 // host (NVIDIA H200 machine, million preset, `reflcap fit --threads 4/8/16`): reading a chunk
 // (~30 MB, one thread) outlasted fitting it on 16 threads, and the pass waited 0.09 / 0.29 /
 // 0.57-0.62 s for chunks. Three bound the extra memory to two decoded chunks.
 constexpr size_t kFitChunksReadAhead = 3;
+// Work per ParallelFor task while the maps are filled: large enough that a task's hand-over is
+// negligible, small enough to balance (a million-texel atlas is ~1,300 rows).
 constexpr int64_t kMapRowsPerTask = 16;
 constexpr int64_t kMapTexelsPerTask = 1 << 14;
+
+// An atlas-sized map with every value `fill`, its pages first touched on all threads: a
+// zero-filled Image of the million atlas (72 MB) took 0.06-0.09 s on one thread, most of it
+// page faults, three of them 0.15 s of the maps' 0.75 s on 2 cores.
+Image FilledMap(const TexelAtlas& atlas, int channels, float fill, int threads) {
+  Image map = Image::Uninitialized(atlas.width, atlas.height, channels);
+  const int64_t per_task = kMapRowsPerTask * int64_t(atlas.width) * channels;
+  ParallelFor(0, int64_t(map.data.size()), per_task, [&](int64_t begin, int64_t end, int) {
+    std::fill(map.data.begin() + begin, map.data.begin() + end, fill);
+  }, threads);
+  return map;
+}
 
 Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits,
                     SigmaSpill* sigma, const std::vector<uint8_t>& albedo_filled,
@@ -146,7 +158,7 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   const int n = int(channel.size());
   // The sigma spill is read from disk on a thread of its own while the other two images are
   // filled (its callback reads only the donors, which stay).
-  Image sigmas(atlas.width, atlas.height, n, 0.0f);
+  Image sigmas = FilledMap(atlas, n, 0.0f, threads);
   std::future<Status> sigmas_read_pending = std::async(std::launch::async, [&] {
     return sigma->ReadAll([&](size_t t, const float* in) {
       float* px = &sigmas.data[size_t(atlas.pixel_of_texel[t]) * n];
@@ -163,15 +175,22 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
   std::future<Status> status_written, params_written;
   {
     constexpr int kStatusChannels = 7;
-    auto status_image = std::make_shared<Image>(atlas.width, atlas.height, kStatusChannels, 0.0f);
+    auto status_image = std::make_shared<Image>(
+        Image::Uninitialized(atlas.width, atlas.height, kStatusChannels));
     Image& status = *status_image;
+    // Pixels without a texel: no texel, 0 iterations and cost, no donor, not filled, no
+    // cluster, no model.
     ParallelFor(0, int64_t(status.PixelCount()), kMapRowsPerTask * atlas.width,
                 [&](int64_t begin, int64_t end, int) {
       for (int64_t p = begin; p < end; ++p) {
-        status.data[kStatusChannels * p] = float(gpu::shared::kFitStatusNoTexel);
-        status.data[kStatusChannels * p + 3] = -1;
-        status.data[kStatusChannels * p + 5] = -1;
-        status.data[kStatusChannels * p + 6] = -1;
+        float* px = &status.data[kStatusChannels * size_t(p)];
+        px[0] = float(gpu::shared::kFitStatusNoTexel);
+        px[1] = 0;
+        px[2] = 0;
+        px[3] = -1;
+        px[4] = 0;
+        px[5] = -1;
+        px[6] = -1;
       }
     }, threads);
     ParallelFor(0, int64_t(fits->size()), kMapTexelsPerTask, [&](int64_t begin, int64_t end, int) {
@@ -195,7 +214,7 @@ Status WriteFitMaps(const fs::path& dir, const TexelAtlas& atlas, FitStore* fits
     });
   }
   {
-    auto params_image = std::make_shared<Image>(atlas.width, atlas.height, n, 0.0f);
+    auto params_image = std::make_shared<Image>(FilledMap(atlas, n, 0.0f, threads));
     Image& params = *params_image;
     ParallelFor(0, int64_t(fits->size()), kMapTexelsPerTask, [&](int64_t begin, int64_t end, int) {
       for (int64_t t = begin; t < end; ++t) {

@@ -4,22 +4,58 @@
 // quantities are 1-channel; per-texel parameter maps may carry many named channels (see
 // exr_io.h). Pixel (x, y) channel c lives at data[(y * width + x) * channels + c].
 #include <cstddef>
+#include <memory>
+#include <new>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "engine/core/check.h"
 
 namespace reflcap {
 
+// std::allocator, except that growing a vector without a value leaves the new elements
+// uninitialised (default-, not value-initialised): Image::Uninitialized hands out a large image
+// without a serial zero fill, for callers that write every value themselves (in parallel, so
+// that the pages are also first touched in parallel). Everything else fills as before.
+template <typename T>
+struct DefaultInitAllocator : std::allocator<T> {
+  template <typename U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  DefaultInitAllocator() = default;
+  template <typename U>
+  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+  template <typename U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
 struct Image {
   int width = 0;
   int height = 0;
   int channels = 0;
-  std::vector<float> data;
+  std::vector<float, DefaultInitAllocator<float>> data;
 
   Image() = default;
   Image(int w, int h, int c, float fill = 0.0f)
       : width(w), height(h), channels(c), data(size_t(w) * size_t(h) * size_t(c), fill) {}
+  // An image whose values are not set: the caller writes every one before reading any.
+  static Image Uninitialized(int w, int h, int c) {
+    Image image;
+    image.width = w;
+    image.height = h;
+    image.channels = c;
+    image.data.resize(size_t(w) * size_t(h) * size_t(c));
+    return image;
+  }
 
   bool empty() const { return data.empty(); }
   size_t PixelCount() const { return size_t(width) * size_t(height); }

@@ -227,7 +227,7 @@ TEST(PngIo, LowBitDepthGreyExpandsToFullRange) {
   ASSERT_EQ(read->channels, 1);
   ASSERT_EQ(read->width, 8);
   const std::vector<float> expected = {1, 0, 1, 1, 0, 0, 0, 0};
-  EXPECT_EQ(read->data, expected);
+  EXPECT_EQ(std::vector<float>(read->data.begin(), read->data.end()), expected);
 }
 
 TEST(PngIo, InterlacedImageIsDeinterlaced) {
@@ -235,7 +235,7 @@ TEST(PngIo, InterlacedImageIsDeinterlaced) {
   StatusOr<Image> read = ReadFixture(dir, "interlaced.png", Bytes(kInterlaced));
   ASSERT_TRUE(read.ok()) << read.status().ToString();
   const std::vector<float> expected = {10 / 255.0f, 20 / 255.0f, 30 / 255.0f, 40 / 255.0f};
-  EXPECT_EQ(read->data, expected);
+  EXPECT_EQ(std::vector<float>(read->data.begin(), read->data.end()), expected);
 }
 
 TEST(PngIo, HeaderLargerThanFileCanHoldIsDataLoss) {
