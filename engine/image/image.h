@@ -4,45 +4,20 @@
 // quantities are 1-channel; per-texel parameter maps may carry many named channels (see
 // exr_io.h). Pixel (x, y) channel c lives at data[(y * width + x) * channels + c].
 #include <cstddef>
-#include <memory>
-#include <new>
 #include <string>
-#include <type_traits>
-#include <utility>
 #include <vector>
 
 #include "engine/core/check.h"
+#include "engine/core/default_init_allocator.h"
 
 namespace reflcap {
-
-// std::allocator, except that growing a vector without a value leaves the new elements
-// uninitialised (default-, not value-initialised): Image::Uninitialized hands out a large image
-// without a serial zero fill, for callers that write every value themselves (in parallel, so
-// that the pages are also first touched in parallel). Everything else fills as before.
-template <typename T>
-struct DefaultInitAllocator : std::allocator<T> {
-  template <typename U>
-  struct rebind {
-    using other = DefaultInitAllocator<U>;
-  };
-  DefaultInitAllocator() = default;
-  template <typename U>
-  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
-  template <typename U>
-  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <typename U, typename... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
 
 struct Image {
   int width = 0;
   int height = 0;
   int channels = 0;
-  std::vector<float, DefaultInitAllocator<float>> data;
+  // Grows without zeroing (Uninitialized below); every constructor that takes a size fills.
+  UninitializedVector<float> data;
 
   Image() = default;
   Image(int w, int h, int c, float fill = 0.0f)
