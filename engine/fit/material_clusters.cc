@@ -834,14 +834,9 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   const double max_increase = options.lobe_transfer.max_cost_increase;
   const int own_params = NumParams(options.lobe_model, fits->lobes()) *
                          ProblemsPerTexel(options.lobe_model);
-  // Counted per task, summed once a task: an atomic add per texel on one shared line costs more
-  // than the texel's test on a 16-core host.
-  struct Counts {
-    size_t recipients = 0, no_lobe = 0, rejected = 0, transferred = 0, replaced = 0;
-    size_t sparse_lent = 0, foreign_lent = 0;
-  };
-  Counts total;
-  std::mutex total_mutex;
+  // Counted per task (in a MaterialClusterStats of its own), added to *stats once a task: an
+  // atomic add per texel on one shared line costs more than the texel's test on a 16-core host.
+  std::mutex stats_mutex;
   const int folds = scores.folds_;
   REFLCAP_CHECK(scores.waiting_.empty()) << "RefitOwnLobes before ApplyClusterLobes";
   REFLCAP_CHECK(folds == 0 || chunk.texel_count == 0 ||
@@ -854,10 +849,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
   // 16 texels per task: each tests up to lobes_per_cluster lobes on all its samples.
   ParallelFor(0, int64_t(chunk.texel_count), 16, [&](int64_t begin, int64_t end, int) {
     TexelResiduals prepared;
-    Counts n;
-    size_t &recipients = n.recipients, &no_lobe = n.no_lobe, &rejected = n.rejected,
-           &transferred = n.transferred, &replaced = n.replaced, &sparse_lent = n.sparse_lent,
-           &foreign_lent = n.foreign_lent;
+    MaterialClusterStats n;
     for (int64_t i = begin; i < end; ++i) {
       const size_t t = size_t(chunk.first_texel) + size_t(i);
       const FitStatus status = fits->status(t);
@@ -874,16 +866,16 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
           fit.lambert_only = false;
           fits->Set(t, fit);
           fits->set_donor(t, FitStore::kClusterLobe);
-          ++sparse_lent;
+          ++n.sparse_lent;
           continue;
         }
       }
       const bool lambert_only = fits->lambert_only(t);
       const bool recipient = !sparse && lambert_only && (status == FitStatus::kUnidentifiableLobe ||
                                                          status == FitStatus::kTooFewSamples);
-      recipients += recipient;
+      n.recipients += recipient;
       if (k < 0 || clusters.kept[size_t(k)].empty()) {
-        no_lobe += recipient;
+        n.no_lobe += recipient;
         continue;
       }
       prepared.Prepare(chunk.SamplesOf(uint32_t(i)), chunk.SampleCount(uint32_t(i)),
@@ -915,7 +907,7 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
         fit.cost = float(cost);
         fits->Set(t, fit);
         fits->set_donor(t, FitStore::kClusterLobe);
-        ++replaced;
+        ++n.replaced;
         continue;
       }
       // What the cluster lobe must beat: a Lambert-only texel's cost plus the allowed increase
@@ -958,12 +950,12 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
           best = foreign;
           best_cost = foreign_cost;
           best_rho = foreign_rho;
-          ++foreign_lent;
+          ++n.foreign_lent;
         }
       }
       const bool take = best != nullptr && (lambert_only ? best_cost <= bar : best_cost < bar);
       if (!take) {
-        rejected += recipient;
+        n.rejected += recipient;
         continue;
       }
       fit.params.lobes = best->lobes;
@@ -973,27 +965,20 @@ void ApplyClusterLobes(const TexelSampleChunk& chunk, const MaterialClusters& cl
       fits->Set(t, fit);
       fits->set_donor(t, FitStore::kClusterLobe);
       if (sparse) {
-        ++sparse_lent;
+        ++n.sparse_lent;
       } else {
-        (lambert_only ? transferred : replaced) += 1;
+        (lambert_only ? n.transferred : n.replaced) += 1;
       }
     }
-    const std::lock_guard<std::mutex> lock(total_mutex);
-    total.recipients += recipients;
-    total.no_lobe += no_lobe;
-    total.rejected += rejected;
-    total.transferred += transferred;
-    total.replaced += replaced;
-    total.sparse_lent += sparse_lent;
-    total.foreign_lent += foreign_lent;
+    const std::lock_guard<std::mutex> lock(stats_mutex);
+    stats->recipients += n.recipients;
+    stats->no_lobe += n.no_lobe;
+    stats->rejected += n.rejected;
+    stats->transferred += n.transferred;
+    stats->replaced += n.replaced;
+    stats->sparse_lent += n.sparse_lent;
+    stats->foreign_lent += n.foreign_lent;
   }, options.threads);
-  stats->recipients += total.recipients;
-  stats->no_lobe += total.no_lobe;
-  stats->rejected += total.rejected;
-  stats->transferred += total.transferred;
-  stats->replaced += total.replaced;
-  stats->sparse_lent += total.sparse_lent;
-  stats->foreign_lent += total.foreign_lent;
 }
 
 }  // namespace reflcap::fit
