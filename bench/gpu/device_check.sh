@@ -18,6 +18,9 @@ T0=$(date +%s)
 stamp() { echo "[$(( $(date +%s) - T0 )) s] $*"; }
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>&1 | tee "$OUT/device.txt"
 { nproc; lscpu 2>/dev/null | grep -E "Model name|Thread|Core|Socket|MHz"; } | tee -a "$OUT/device.txt"
+# Transparent huge pages: the sample store's chunks are advised MADV_HUGEPAGE (core/large_buffer.h),
+# which only "always" or "madvise" honours.
+echo "THP: $(cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null)" | tee -a "$OUT/device.txt"
 
 # 1. Every test, one process each (a teardown crash shows here), plus the masks' figures.
 # (The scanner's tests are left out with its binaries: pack.sh.)
@@ -90,6 +93,15 @@ for name, d in cols:
 print(f"{'stage':26s}" + "".join(f" {n:>8s}" for n, _ in cols))
 for k in rows["16"]:
     print(f"{k:26s}" + "".join(f" {rows[n].get(k, float('nan')):8.3f}" for n, _ in cols))
+# Where the Vulkan fit pass's time went (seconds summed over chunks; two chunks in flight overlap).
+for name, d in cols[:4]:
+    try:
+        v = json.load(open(d + "/fit_report.json")).get("vulkan", {})
+    except OSError:
+        continue
+    print(f"vulkan {name}: " + ", ".join(f"{k} {v[k]:.3f}" for k in
+          ("device_s", "prepare_s", "prepare_texel_thread_s", "prepare_layout_thread_s", "finish_s")
+          if k in v))
 PY
 stamp "fits done"
 

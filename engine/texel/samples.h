@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "engine/core/large_buffer.h"
+
 namespace reflcap {
 
 struct BrdfSample {
@@ -25,7 +27,10 @@ struct TexelSampleChunk {
   uint32_t first_texel = 0;
   uint32_t texel_count = 0;
   std::vector<uint64_t> offsets;  // texel_count + 1 entries, offsets[0] = 0
-  std::vector<BrdfSample> samples;
+  // Grown without zeroing, and on huge pages when large (core/large_buffer.h): every grower
+  // writes what it adds (a chunk read from its file, the k-fold refits' copies), and a chunk
+  // read is written once, by the kernel's copy from the file, then kept.
+  LargeBufferVector<BrdfSample> samples;
 
   uint64_t SampleCount(uint32_t i) const { return offsets[i + 1] - offsets[i]; }
   const BrdfSample* SamplesOf(uint32_t i) const { return samples.data() + offsets[i]; }

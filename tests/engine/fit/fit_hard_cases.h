@@ -20,7 +20,7 @@ inline TexelSampleChunk OneTexel(const std::vector<BrdfSample>& samples) {
   TexelSampleChunk chunk;
   chunk.texel_count = 1;
   chunk.offsets = {0, samples.size()};
-  chunk.samples = samples;
+  chunk.samples.assign(samples.begin(), samples.end());
   return chunk;
 }
 
