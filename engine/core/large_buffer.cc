@@ -39,8 +39,8 @@ void* AllocateLargeBuffer(size_t bytes) {
   const size_t tail = begin + length + kHugePage - (aligned + length);
   if (tail > 0) munmap(reinterpret_cast<void*>(aligned + length), tail);
   void* p = reinterpret_cast<void*>(aligned);
-  // Advice only: a kernel without transparent huge pages (or with them off) refuses it, and the
-  // buffer is served in 4 KiB pages as malloc's would be.
+  // Advice only: a kernel built without transparent huge pages refuses it, one with them set to
+  // "never" ignores it, and the buffer is served in 4 KiB pages as malloc's would be.
   madvise(p, length, MADV_HUGEPAGE);
   return p;
 #else

@@ -1,5 +1,5 @@
-// LargeBufferVector: large buffers mapped on their own, 2 MiB-aligned; small ones from the heap;
-// contents kept through growth, copies and moves; nothing zeroed that is not needed.
+// LargeBufferVector: large buffers mapped on their own, 2 MiB-aligned; small ones work as any
+// vector's; contents kept through growth, copies and moves.
 #include "engine/core/large_buffer.h"
 
 #include <gtest/gtest.h>
@@ -44,7 +44,7 @@ TEST(LargeBufferVector, LargeBuffersAreHugePageAlignedAndKeepTheirContents) {
   EXPECT_EQ(moved.capacity(), 0u);
 }
 
-TEST(LargeBufferVector, SmallBuffersComeFromTheHeap) {
+TEST(LargeBufferVector, SmallBuffersWorkAndGrowIntoAMapping) {
   LargeBufferVector<uint32_t> v(100);
   std::iota(v.begin(), v.end(), 0u);
   EXPECT_EQ(std::accumulate(v.begin(), v.end(), 0u), 4950u);
