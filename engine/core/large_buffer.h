@@ -28,27 +28,30 @@ inline constexpr size_t kLargeBufferBytes = size_t{2} << 20;
 void* AllocateLargeBuffer(size_t bytes);
 void FreeLargeBuffer(void* p, size_t bytes) noexcept;
 
-template <typename T>
+// kMinBytes: the size from which allocations are mapped on their own (at least one huge page).
+template <typename T, size_t kMinBytes = kLargeBufferBytes>
 class LargeBufferAllocator : public DefaultInitAllocator<T> {
+  static_assert(kMinBytes >= kLargeBufferBytes, "a mapping smaller than a huge page gains nothing");
+
  public:
   using value_type = T;
   template <typename U>
   struct rebind {
-    using other = LargeBufferAllocator<U>;
+    using other = LargeBufferAllocator<U, kMinBytes>;
   };
   LargeBufferAllocator() = default;
   template <typename U>
-  LargeBufferAllocator(const LargeBufferAllocator<U>&) noexcept {}
+  LargeBufferAllocator(const LargeBufferAllocator<U, kMinBytes>&) noexcept {}
 
   T* allocate(size_t n) {
     if (n > SIZE_MAX / sizeof(T)) throw std::bad_array_new_length();
     const size_t bytes = n * sizeof(T);
-    if (bytes < kLargeBufferBytes) return std::allocator<T>().allocate(n);
+    if (bytes < kMinBytes) return std::allocator<T>().allocate(n);
     return static_cast<T*>(AllocateLargeBuffer(bytes));
   }
   void deallocate(T* p, size_t n) noexcept {
     const size_t bytes = n * sizeof(T);
-    if (bytes < kLargeBufferBytes) {
+    if (bytes < kMinBytes) {
       std::allocator<T>().deallocate(p, n);
     } else {
       FreeLargeBuffer(p, bytes);
@@ -56,9 +59,9 @@ class LargeBufferAllocator : public DefaultInitAllocator<T> {
   }
   // Stateless: memory from one instance is freed by any other.
   template <typename U>
-  bool operator==(const LargeBufferAllocator<U>&) const noexcept { return true; }
+  bool operator==(const LargeBufferAllocator<U, kMinBytes>&) const noexcept { return true; }
   template <typename U>
-  bool operator!=(const LargeBufferAllocator<U>&) const noexcept { return false; }
+  bool operator!=(const LargeBufferAllocator<U, kMinBytes>&) const noexcept { return false; }
 };
 
 // A vector grown without zeroing, its large buffers on huge pages (see above).

@@ -5,9 +5,16 @@
 #include <utility>
 
 #include "engine/core/check.h"
+#include "engine/core/parallel.h"
 #include "engine/fit/problem.h"
 
 namespace reflcap::fit {
+namespace {
+
+// Texels per task of the constructor's initialisation: 2.5 MB of parameters at one lobe.
+constexpr int64_t kInitTexelsPerTask = 1 << 15;
+
+}  // namespace
 
 void PackParams(const brdf::BrdfParams& p, int lobes, float* out) {
   for (int c = 0; c < brdf::kChannels; ++c) out[c] = p.rho_d[c];
@@ -33,23 +40,28 @@ void UnpackParams(const float* in, int lobes, brdf::BrdfParams* p) {
   }
 }
 
-FitStore::FitStore(size_t texels, int lobes)
-    : lobes_(lobes),
-      stride_(brdf::kChannels * brdf::ParamsPerChannel(lobes)),
-      cost_(texels),
-      iterations_(texels),
-      samples_(texels),
-      residuals_(texels),
-      donor_(texels, -1),
-      status_(texels),
-      lambert_only_(texels) {
+FitStore::FitStore(size_t texels, int lobes, int threads)
+    : lobes_(lobes), stride_(brdf::kChannels * brdf::ParamsPerChannel(lobes)) {
   REFLCAP_CHECK(texels <= kMaxTexels) << texels << " texels";
   REFLCAP_CHECK(lobes >= 0 && lobes <= brdf::kMaxLobes) << lobes << " lobes";
+  // Allocated uninitialised, then every entry written once, on all threads.
   params_.resize(texels * stride_);
+  cost_.resize(texels);
+  iterations_.resize(texels);
+  samples_.resize(texels);
+  residuals_.resize(texels);
+  donor_.resize(texels);
+  status_.resize(texels);
+  lambert_only_.resize(texels);
   TexelFit empty;
   BeginTexel(lobes, &empty);
   empty.status = FitStatus::kTooFewSamples;
-  for (size_t t = 0; t < texels; ++t) Set(t, empty);
+  ParallelFor(0, int64_t(texels), kInitTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+    for (size_t t = size_t(begin); t < size_t(end); ++t) {
+      Set(t, empty);
+      donor_[t] = int32_t(kNoDonor);
+    }
+  }, threads);
 }
 
 void FitStore::Set(size_t t, const TexelFit& fit) {
@@ -83,7 +95,7 @@ void FitStore::set_donor(size_t t, int64_t donor) {
   donor_[t] = int32_t(donor);
 }
 
-void FitStore::ReleaseParams() { std::vector<float>().swap(params_); }
+void FitStore::ReleaseParams() { LargeBufferVector<float>().swap(params_); }
 
 namespace {
 // Texels per read or write of the scratch file: ~1 MB for one lobe, large enough for sequential

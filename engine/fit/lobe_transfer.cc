@@ -7,6 +7,7 @@
 
 #include "engine/brdf/lafortune.h"
 #include "engine/core/check.h"
+#include "engine/core/large_buffer.h"
 #include "engine/core/parallel.h"
 #include "engine/fit/batched_kernel.h"
 #include "engine/fit/material_clusters.h"
@@ -282,21 +283,30 @@ LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
   // O(1), and one with donors reads a compact grid instead of the fit store per pixel. The
   // candidates are those of a plain scan of every window (the window relation is symmetric).
   const size_t width = size_t(atlas.width), height = size_t(atlas.height);
+  // Both grids on huge pages, written before they are read (a million-texel atlas: 13 MB a
+  // round, every round; faulted in 4 KiB at a time they were most of this function's time).
   // FitStore::kMaxTexels keeps texel indices within int32.
-  std::vector<int32_t> donor_at(width * height, -1);
+  LargeBufferVector<int32_t> donor_at(width * height);
+  constexpr int64_t kPixelsPerTask = 1 << 16;
+  ParallelFor(0, int64_t(donor_at.size()), kPixelsPerTask, [&](int64_t begin, int64_t end, int) {
+    std::fill(donor_at.begin() + begin, donor_at.begin() + end, -1);
+  });
   ParallelFor(0, int64_t(fits.size()), 1 << 16, [&](int64_t begin, int64_t end, int) {
     for (int64_t d = begin; d < end; ++d) {
       if ((lenders && !(*lenders)[size_t(d)]) || !IsDonor(fits, size_t(d))) continue;
       donor_at[atlas.pixel_of_texel[size_t(d)]] = int32_t(d);  // one texel per pixel: no race
     }
   });
-  // count[(y + 1) * (width + 1) + x + 1] = donors in pixels [0, x] x [0, y].
-  std::vector<uint32_t> count((width + 1) * (height + 1), 0);
+  // count[(y + 1) * (width + 1) + x + 1] = donors in pixels [0, x] x [0, y]; row 0 and column 0
+  // are 0.
+  LargeBufferVector<uint32_t> count((width + 1) * (height + 1));
+  std::fill(count.begin(), count.begin() + (width + 1), 0u);
   for (size_t y = 0; y < height; ++y) {
     uint32_t row = 0;
     const int32_t* src = donor_at.data() + y * width;
     const uint32_t* above = count.data() + y * (width + 1);
     uint32_t* out = count.data() + (y + 1) * (width + 1);
+    out[0] = 0;
     for (size_t x = 0; x < width; ++x) {
       row += src[x] >= 0;
       out[x + 1] = above[x + 1] + row;
