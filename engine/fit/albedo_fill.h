@@ -31,8 +31,9 @@ struct AlbedoFillStats {
 
 // Fills the unseen texels of `fits` (indexed like atlas.pixel_of_texel) as described above and
 // marks them in `filled` (resized to fits->size(); 1 = filled). The texels with samples are not
-// changed. Deterministic: a round reads only what the previous rounds wrote.
+// changed. Deterministic: a round reads only what the previous rounds wrote, so the result does
+// not depend on `threads` (0: all).
 AlbedoFillStats FillUnseenAlbedo(const TexelAtlas& atlas, const AlbedoFillOptions& options,
-                                 FitStore* fits, std::vector<uint8_t>* filled);
+                                 FitStore* fits, std::vector<uint8_t>* filled, int threads = 0);
 
 }  // namespace reflcap::fit

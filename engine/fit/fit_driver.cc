@@ -676,7 +676,8 @@ StatusOr<FitRunSummary> FinishFit(const fs::path& samples, const SampleStoreRead
   // which give a filled texel its material's lobe.
   const auto fill_start = std::chrono::steady_clock::now();
   std::vector<uint8_t> albedo_filled;
-  const AlbedoFillStats fill = FillUnseenAlbedo(atlas, options.albedo_fill, &fits, &albedo_filled);
+  const AlbedoFillStats fill =
+      FillUnseenAlbedo(atlas, options.albedo_fill, &fits, &albedo_filled, options.threads);
   const double fill_seconds = Seconds(fill_start);
   // Material clusters (material_clusters.h): the texels still without a lobe take one that the
   // pooled samples of their material support.

@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "engine/brdf/lafortune.h"
@@ -86,6 +88,77 @@ TEST(AlbedoFill, AHoleFillsInwardsUpToRadiusTimesRounds) {
   for (int t = 7; t <= 10; ++t) {
     EXPECT_EQ(filled[t], 0) << t;
     EXPECT_EQ(store.Get(t).params.rho_d[1], 0.0f) << t;
+  }
+}
+
+TEST(AlbedoFill, ALargeAtlasFillsRoundByRoundWhateverTheThreads) {
+  // A 160 x 160 atlas (25,600 texels: the fill's parallel loops cut it into many tasks) seen
+  // everywhere but a 70 x 70 hole and a scatter of single texels, each seen texel with its own
+  // albedo. Expected: exactly what the rounds define, computed here one texel at a time (a
+  // round reads the albedos of the texels seen or filled before it), the same on 1, 2 and 3
+  // threads; the hole's centre is 35 texels from its rim, beyond 2 x 16, so some stay unseen.
+  constexpr int kSide = 160;
+  TexelAtlas atlas;
+  atlas.width = atlas.height = kSide;
+  std::vector<TexelFit> fits;
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      atlas.pixel_of_texel.push_back(uint32_t(y * kSide + x));
+      const bool hole = (x >= 45 && x < 115 && y >= 45 && y < 115) || (x * 7 + y * 13) % 17 == 0;
+      fits.push_back(hole ? Unseen()
+                          : Seen({0.1f + 0.005f * float(x % 100), 0.2f + 0.004f * float(y % 100),
+                                  0.3f + 0.001f * float((x + y) % 100)}));
+    }
+  }
+  const AlbedoFillOptions options;
+  // The reference.
+  std::vector<std::array<float, 3>> rho(fits.size());
+  std::vector<uint8_t> known(fits.size()), expected_filled(fits.size(), 0);
+  for (size_t t = 0; t < fits.size(); ++t) {
+    rho[t] = fits[t].params.rho_d;
+    known[t] = fits[t].residuals > 0;
+  }
+  int expected_rounds = 0;
+  for (int round = 0; round < options.rounds; ++round) {
+    std::vector<std::pair<size_t, std::array<float, 3>>> updates;
+    for (size_t t = 0; t < fits.size(); ++t) {
+      if (known[t]) continue;
+      const int x0 = int(t) % kSide, y0 = int(t) / kSide, r = options.radius;
+      std::array<double, 3> sum{};
+      int n = 0;
+      for (int y = std::max(0, y0 - r); y <= std::min(kSide - 1, y0 + r); ++y) {
+        for (int x = std::max(0, x0 - r); x <= std::min(kSide - 1, x0 + r); ++x) {
+          const size_t d = size_t(y * kSide + x);
+          if (!known[d]) continue;
+          for (int c = 0; c < 3; ++c) sum[size_t(c)] += rho[d][size_t(c)];
+          ++n;
+        }
+      }
+      if (n > 0) {
+        updates.push_back({t, {float(sum[0] / n), float(sum[1] / n), float(sum[2] / n)}});
+      }
+    }
+    if (updates.empty()) break;
+    for (const auto& [t, value] : updates) {
+      rho[t] = value;
+      known[t] = 1;
+      expected_filled[t] = 1;
+    }
+    ++expected_rounds;
+  }
+  ASSERT_EQ(expected_rounds, options.rounds);  // the hole is not filled before the last round
+  ASSERT_NE(std::count(expected_filled.begin(), expected_filled.end(), 1), 0);
+  ASSERT_NE(std::count(known.begin(), known.end(), 0), 0);  // the hole's centre stays unseen
+
+  for (int threads : {1, 2, 3}) {
+    FitStore store = StoreOf(fits);
+    std::vector<uint8_t> filled;
+    const AlbedoFillStats stats = FillUnseenAlbedo(atlas, options, &store, &filled, threads);
+    EXPECT_EQ(stats.rounds, expected_rounds) << threads << " threads";
+    EXPECT_EQ(filled, expected_filled) << threads << " threads";
+    for (size_t t = 0; t < fits.size(); ++t) {
+      ASSERT_EQ(store.Get(t).params.rho_d, rho[t]) << "texel " << t << ", " << threads << " threads";
+    }
   }
 }
 
