@@ -778,9 +778,16 @@ KFoldScores::KFoldScores(size_t texels, const FitOptions& options, uint64_t batc
     : folds_(options.clusters.model_choice == ModelChoice::kKFold ? options.clusters.folds : 0),
       batch_samples_(std::max<uint64_t>(batch_samples, 1)) {
   if (folds_ == 0) return;
-  best_cv_.assign(texels, std::numeric_limits<double>::infinity());
-  best_lobe_.assign(texels, -1);
-  own_cv_.assign(texels, 0.0);
+  // Allocated uninitialised (on huge pages: 18 MB for a million texels), filled on all threads.
+  best_cv_.resize(texels);
+  best_lobe_.resize(texels);
+  own_cv_.resize(texels);
+  ParallelFor(0, int64_t(texels), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
+    std::fill(best_cv_.begin() + begin, best_cv_.begin() + end,
+              std::numeric_limits<double>::infinity());
+    std::fill(best_lobe_.begin() + begin, best_lobe_.begin() + end, int16_t(-1));
+    std::fill(own_cv_.begin() + begin, own_cv_.begin() + end, 0.0);
+  }, options.threads);
   waiting_samples_.offsets.assign(1, 0);
 }
 
@@ -868,7 +875,7 @@ void RefitOwnLobes(const FitOptions& options, KFoldScores* scores, MaterialClust
     REFLCAP_CHECK(fitter.ok()) << fitter.status().ToString();  // the CPU backend always exists
     scores->fitter_ = std::move(fitter).value();
   }
-  std::vector<TexelFit> fold_fit;
+  std::vector<TexelFit>& fold_fit = scores->fold_fit_;
   for (int f = 0; f < folds && !refit.empty(); ++f) {
     // The refitted texels' samples outside fold f: counted, then copied, in parallel.
     TexelSampleChunk& train = scores->train_;  // its buffers reused: no fresh pages per fold

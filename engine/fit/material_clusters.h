@@ -80,6 +80,7 @@
 #include <vector>
 
 #include "engine/brdf/lafortune.h"
+#include "engine/core/large_buffer.h"
 #include "engine/fit/fit_store.h"
 #include "engine/fit/fitter.h"
 #include "engine/fit/lobe_transfer.h"
@@ -218,14 +219,15 @@ class KFoldScores {
   int folds_ = 0;
   uint64_t batch_samples_ = kRefitBatchSamples;
   // Per texel of the store (empty without folds).
-  std::vector<double> best_cv_;     // the best kept lobe's held-out cost
-  std::vector<int16_t> best_lobe_;  // its index in kept[LenderOf(t)]; -1: none scored
-  std::vector<double> own_cv_;      // an own lobe's held-out cost, refitted without each fold
+  LargeBufferVector<double> best_cv_;     // the best kept lobe's held-out cost
+  LargeBufferVector<int16_t> best_lobe_;  // its index in kept[LenderOf(t)]; -1: none scored
+  LargeBufferVector<double> own_cv_;      // an own lobe's held-out cost, refitted without each fold
   // Texels whose own lobes wait for their refits (store indices, ascending), with their samples
   // (waiting texel j owns waiting_samples_ texel j's).
   std::vector<uint32_t> waiting_;
   TexelSampleChunk waiting_samples_;
   TexelSampleChunk train_;  // one fold's training samples; buffers kept from batch to batch
+  std::vector<TexelFit> fold_fit_;  // one fold's refits; kept from batch to batch
   std::unique_ptr<Fitter> fitter_;  // the CPU batched fitter of the refits, made once
 };
 
