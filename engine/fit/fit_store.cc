@@ -11,7 +11,7 @@
 namespace reflcap::fit {
 namespace {
 
-// Texels per task of the constructor's initialisation: 2.5 MB of parameters at one lobe.
+// Texels per task of the constructor's initialisation: ~2 MB of parameters at one lobe.
 constexpr int64_t kInitTexelsPerTask = 1 << 15;
 
 }  // namespace
