@@ -22,10 +22,11 @@ Status AlbedoFillOptions::Validate() const {
 
 namespace {
 
-// Texels (or pixels) per task of the fill's parallel loops: an open texel reads a window of up
-// to (2 radius + 1)^2 pixels, so a task of 1,024 is several microseconds of work.
-constexpr int64_t kTexelsPerTask = 1024;
-constexpr int64_t kPixelsPerTask = 1 << 16;
+// Open texels per task of a round's parallel loops: an open texel reads a window of up to
+// (2 radius + 1)^2 pixels, so a task of 1,024 is several microseconds of work.
+constexpr int64_t kOpenTexelsPerTask = 1024;
+// Texels per task of the grid's construction (one store each).
+constexpr int64_t kTexelsPerTask = 1 << 16;
 
 }  // namespace
 
@@ -37,10 +38,8 @@ AlbedoFillStats FillUnseenAlbedo(const TexelAtlas& atlas, const AlbedoFillOption
   if (!options.enabled) return stats;
   // One texel per pixel: the writes do not race.
   LargeBufferVector<int32_t> texel_at(size_t(atlas.width) * atlas.height);
-  ParallelFor(0, int64_t(texel_at.size()), kPixelsPerTask, [&](int64_t begin, int64_t end, int) {
-    std::fill(texel_at.begin() + begin, texel_at.begin() + end, -1);
-  }, threads);
-  ParallelFor(0, int64_t(fits->size()), kPixelsPerTask, [&](int64_t begin, int64_t end, int) {
+  ParallelFill(&texel_at, -1, threads);
+  ParallelFor(0, int64_t(fits->size()), kTexelsPerTask, [&](int64_t begin, int64_t end, int) {
     for (int64_t t = begin; t < end; ++t) texel_at[atlas.pixel_of_texel[size_t(t)]] = int32_t(t);
   }, threads);
   // known: has samples, or was filled in an earlier round.
@@ -60,7 +59,7 @@ AlbedoFillStats FillUnseenAlbedo(const TexelAtlas& atlas, const AlbedoFillOption
   for (int round = 0; round < options.rounds && !open.empty(); ++round) {
     rho.resize(open.size());
     found.assign(open.size(), 0);
-    ParallelFor(0, int64_t(open.size()), kTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+    ParallelFor(0, int64_t(open.size()), kOpenTexelsPerTask, [&](int64_t begin, int64_t end, int) {
       for (int64_t i = begin; i < end; ++i) {
         const uint32_t t = open[size_t(i)];
         const int x0 = int(atlas.pixel_of_texel[t] % uint32_t(atlas.width));
@@ -81,7 +80,7 @@ AlbedoFillStats FillUnseenAlbedo(const TexelAtlas& atlas, const AlbedoFillOption
       }
     }, threads);
     // The round's albedos stored (each texel its own: in parallel), then the texels still open.
-    ParallelFor(0, int64_t(open.size()), kTexelsPerTask, [&](int64_t begin, int64_t end, int) {
+    ParallelFor(0, int64_t(open.size()), kOpenTexelsPerTask, [&](int64_t begin, int64_t end, int) {
       for (int64_t i = begin; i < end; ++i) {
         if (!found[size_t(i)]) continue;
         const uint32_t t = open[size_t(i)];

@@ -287,10 +287,7 @@ LobeCandidates FindLobeDonors(const TexelAtlas& atlas, const FitStore& fits,
   // round; in 4 KiB pages the million fit's rounds took ~14,000 page faults here).
   // FitStore::kMaxTexels keeps texel indices within int32.
   LargeBufferVector<int32_t> donor_at(width * height);
-  constexpr int64_t kPixelsPerTask = 1 << 16;
-  ParallelFor(0, int64_t(donor_at.size()), kPixelsPerTask, [&](int64_t begin, int64_t end, int) {
-    std::fill(donor_at.begin() + begin, donor_at.begin() + end, -1);
-  });
+  ParallelFill(&donor_at, -1);
   ParallelFor(0, int64_t(fits.size()), 1 << 16, [&](int64_t begin, int64_t end, int) {
     for (int64_t d = begin; d < end; ++d) {
       if ((lenders && !(*lenders)[size_t(d)]) || !IsDonor(fits, size_t(d))) continue;

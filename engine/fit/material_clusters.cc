@@ -118,7 +118,7 @@ void ForEachBlock(size_t items, int threads, const Body& body) {
   }, threads);
 }
 
-// The two sides' feature sums and counts (a split's partial sums; one side only for a node).
+// The two sides' feature sums and counts (a split's partial sums).
 struct SideSums {
   Feature sum[2] = {Feature::Zero(), Feature::Zero()};
   size_t n[2] = {0, 0};
@@ -137,13 +137,15 @@ SideSums AddInOrder(const std::vector<SideSums>& blocks) {
 }
 
 Feature MeanOf(const FeatureList& f, const std::vector<uint32_t>& items, int threads) {
-  std::vector<SideSums> blocks(size_t(BlockCount(items.size())));
+  std::vector<Feature> blocks(size_t(BlockCount(items.size())));
   ForEachBlock(items.size(), threads, [&](size_t begin, size_t end, size_t block) {
     Feature sum = Feature::Zero();
     for (size_t k = begin; k < end; ++k) sum += f[items[k]];
-    blocks[block].sum[0] = sum;
+    blocks[block] = sum;
   });
-  return AddInOrder(blocks).sum[0] / double(std::max<size_t>(items.size(), 1));
+  Feature total = Feature::Zero();
+  for (const Feature& b : blocks) total += b;
+  return total / double(std::max<size_t>(items.size(), 1));
 }
 
 // Sum of squared distances to the mean, side by side: side[k] picks item k's mean (null: all
@@ -782,12 +784,9 @@ KFoldScores::KFoldScores(size_t texels, const FitOptions& options, uint64_t batc
   best_cv_.resize(texels);
   best_lobe_.resize(texels);
   own_cv_.resize(texels);
-  ParallelFor(0, int64_t(texels), kItemsPerTask, [&](int64_t begin, int64_t end, int) {
-    std::fill(best_cv_.begin() + begin, best_cv_.begin() + end,
-              std::numeric_limits<double>::infinity());
-    std::fill(best_lobe_.begin() + begin, best_lobe_.begin() + end, int16_t(-1));
-    std::fill(own_cv_.begin() + begin, own_cv_.begin() + end, 0.0);
-  }, options.threads);
+  ParallelFill(&best_cv_, std::numeric_limits<double>::infinity(), options.threads);
+  ParallelFill(&best_lobe_, int16_t(-1), options.threads);
+  ParallelFill(&own_cv_, 0.0, options.threads);
   waiting_samples_.offsets.assign(1, 0);
 }
 
